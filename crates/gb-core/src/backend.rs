@@ -1,0 +1,116 @@
+//! Run-time backend selection: every model runs on ndarray, flex or wgpu, chosen by
+//! `--device` on the command line.
+
+use std::fmt;
+use std::str::FromStr;
+
+use burn::tensor::{Device, DeviceKind};
+use serde::{Deserialize, Serialize};
+
+/// A compute backend that gb-nerf-rs can run on, chosen at run time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum BackendKind {
+    /// Burn's deprecated NdArray CPU backend (slow; kept as a reference).
+    Ndarray,
+    /// Burn's pure-Rust Flex CPU backend (the fast CPU default).
+    #[default]
+    Flex,
+    /// wgpu: Vulkan/Metal/DX12 GPUs, or Mesa's lavapipe on a CPU-only machine.
+    Wgpu,
+}
+
+impl BackendKind {
+    /// Every backend, in the order the tests visit them.
+    pub const ALL: [BackendKind; 3] = [BackendKind::Ndarray, BackendKind::Flex, BackendKind::Wgpu];
+
+    /// The plain (non-autodiff) Burn device for this backend.
+    #[allow(deprecated)]
+    pub fn device(self) -> Device {
+        match self {
+            BackendKind::Ndarray => Device::ndarray(),
+            BackendKind::Flex => Device::flex(),
+            BackendKind::Wgpu => Device::wgpu(DeviceKind::DefaultDevice),
+        }
+    }
+
+    /// The same device with autodiff enabled, for training.
+    pub fn autodiff_device(self) -> Device {
+        self.device().autodiff()
+    }
+
+    /// The lowercase name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Ndarray => "ndarray",
+            BackendKind::Flex => "flex",
+            BackendKind::Wgpu => "wgpu",
+        }
+    }
+}
+
+impl fmt::Display for BackendKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Error for an unknown backend name.
+#[derive(Debug, thiserror::Error)]
+#[error("unknown device '{0}': expected one of ndarray, flex, wgpu")]
+pub struct UnknownBackend(pub String);
+
+impl FromStr for BackendKind {
+    type Err = UnknownBackend;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "ndarray" => Ok(BackendKind::Ndarray),
+            "flex" | "cpu" => Ok(BackendKind::Flex),
+            "wgpu" | "gpu" | "vulkan" => Ok(BackendKind::Wgpu),
+            other => Err(UnknownBackend(other.to_string())),
+        }
+    }
+}
+
+/// The backends a multi-backend test should visit.
+///
+/// All three by default; CI installs Mesa's lavapipe so wgpu really runs. A developer
+/// without a Vulkan driver may restrict the list with `GB_TEST_BACKENDS=ndarray,flex`.
+pub fn test_backends() -> Vec<BackendKind> {
+    match std::env::var("GB_TEST_BACKENDS") {
+        Ok(list) if !list.trim().is_empty() => list
+            .split(',')
+            .map(|s| {
+                s.parse()
+                    .unwrap_or_else(|e| panic!("GB_TEST_BACKENDS: {e}"))
+            })
+            .collect(),
+        _ => BackendKind::ALL.to_vec(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_names_and_rejects_unknown() {
+        assert_eq!("ndarray".parse::<BackendKind>().unwrap(), BackendKind::Ndarray);
+        assert_eq!("FLEX".parse::<BackendKind>().unwrap(), BackendKind::Flex);
+        assert_eq!("wgpu".parse::<BackendKind>().unwrap(), BackendKind::Wgpu);
+        let err = "cuda".parse::<BackendKind>().unwrap_err();
+        assert!(err.to_string().contains("cuda"));
+    }
+
+    #[test]
+    fn every_backend_adds_numbers() {
+        for kind in test_backends() {
+            let device = kind.device();
+            let t = burn::tensor::Tensor::<1>::from_floats([1.0, 2.0, 3.5], &device);
+            let s: f32 = t.sum().into_scalar().elem();
+            assert_eq!(s, 6.5, "backend {kind}");
+        }
+    }
+
+    use burn::tensor::ElementConversion;
+}

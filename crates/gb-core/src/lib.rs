@@ -1,0 +1,12 @@
+//! Shared plumbing used by every gb-nerf-rs crate: run-time backend selection
+//! ([`backend`]), crash-safe file writes ([`atomic`]) and PNG/JPEG image IO ([`image_io`]).
+
+pub mod atomic;
+pub mod backend;
+pub mod image_io;
+pub mod testdata;
+
+pub use atomic::write_atomic;
+pub use backend::{test_backends, BackendKind};
+pub use testdata::test_data_dir;
+pub use image_io::{read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage};

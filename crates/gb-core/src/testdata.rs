@@ -1,0 +1,19 @@
+//! Where the shared test data lives (`GB_TEST_DATA`, set by `.ci/run` to `../shared`).
+
+use std::path::PathBuf;
+
+/// The shared data folder: `$GB_TEST_DATA`, or `../shared` beside the checkout when the
+/// variable is unset. Panics with a clear message when neither exists, because tests
+/// that need real data must not silently pass without it.
+pub fn test_data_dir() -> PathBuf {
+    let dir = match std::env::var_os("GB_TEST_DATA") {
+        Some(d) => PathBuf::from(d),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"),
+    };
+    assert!(
+        dir.join("data").is_dir(),
+        "shared test data not found at {} (set GB_TEST_DATA to the folder holding data/ and weights/)",
+        dir.display()
+    );
+    dir
+}

@@ -1,0 +1,19 @@
+//! Loading weights from a diffusers-layout checkpoint folder (or a Hugging Face hub id)
+//! into Burn modules.
+//!
+//! - [`keymap`]: THE table of every key remapping, one section per component.
+//! - [`load`]: [`load_module`], which applies `*.safetensors` files to a module through a
+//!   keymap section, checking that every tensor is present and well-shaped.
+//! - [`folder`]: the diffusers folder (`model_index.json`, sub-folders, `.fp16` variants).
+//! - [`hub`]: resolving a hub id to a local folder through the `hf-hub` cache.
+
+pub mod error;
+pub mod folder;
+pub mod hub;
+pub mod keymap;
+pub mod load;
+
+pub use error::CheckpointError;
+pub use folder::{DiffusersFolder, WeightVariant};
+pub use keymap::KeymapSection;
+pub use load::{load_module, LoadReport};

@@ -1,0 +1,113 @@
+//! The one interface every score-distillation guidance implements (threestudio style: one
+//! small file per method, [`super::sds`], [`super::csd`], [`super::bsd`]), and the serialisable
+//! [`GuidanceMethod`] that a config names.
+//!
+//! A guidance declares which text conditionings ("branches") its single batched U-Net call
+//! evaluates, and combines the resulting noise predictions into the unweighted score
+//! direction. The driver ([`super::step::ScoreDistiller`]) multiplies that direction by
+//! `w(t)`, masks it, zeroes non-finite values, optionally clamps it and injects it.
+
+use burn::tensor::Tensor;
+use serde::{Deserialize, Serialize};
+
+use super::bsd::Bsd;
+use super::csd::Csd;
+use super::error::DistillError;
+use super::sds::Sds;
+
+/// The text conditioning of one row block of the batched U-Net call.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Branch {
+    /// The (appearance or geometry) prompt `y`.
+    Text,
+    /// The empty prompt `null` (unconditional).
+    Unconditional,
+    /// The negative prompt `y_neg`.
+    Negative,
+}
+
+/// A score-distillation guidance: which eps it needs and how it combines them.
+pub trait Guidance: Send + Sync {
+    /// Short lowercase name (`sds`, `csd`, `bsd`) for logs and reports.
+    fn name(&self) -> &'static str;
+
+    /// The conditionings evaluated by the one batched U-Net call, in batch order.
+    /// The U-Net batch is `branches().len()` times the number of images.
+    fn branches(&self) -> &'static [Branch];
+
+    /// Combines the noise predictions (one tensor per branch, in [`Guidance::branches`]
+    /// order, each `[B, C, h, w]`) and the injected noise into the unweighted direction.
+    fn direction(&self, eps: &[Tensor<4>], noise: &Tensor<4>) -> Tensor<4>;
+}
+
+/// A guidance method and its weights, as named in a config (`method = "bsd"` ...).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "method", rename_all = "snake_case")]
+pub enum GuidanceMethod {
+    /// Score Distillation Sampling with classifier-free guidance scale `guidance_scale`
+    /// (diffusers' convention, see [`Sds`]).
+    Sds {
+        /// Classifier-free guidance scale `s`.
+        guidance_scale: f32,
+    },
+    /// Classifier Score Distillation; `w3 = None` means the original CSD, `w3 = w2 - w1`.
+    Csd {
+        /// Weight of `eps(y)`.
+        w1: f32,
+        /// Weight of `eps(y_neg)` (subtracted).
+        w2: f32,
+        /// Weight of `eps(null)`; `None` for the default `w2 - w1`.
+        #[serde(default)]
+        w3: Option<f32>,
+    },
+    /// Balanced Score Distillation: `w1*eps(y) - w2*eps(y_neg)`.
+    Bsd {
+        /// Weight of `eps(y)`.
+        w1: f32,
+        /// Weight of `eps(y_neg)` (subtracted).
+        w2: f32,
+    },
+}
+
+impl GuidanceMethod {
+    /// The paper's BSD weights for RGB renders, `(w1, w2) = (7.5, 6.5)`.
+    pub fn paper_rgb() -> Self {
+        GuidanceMethod::Bsd { w1: 7.5, w2: 6.5 }
+    }
+
+    /// The paper's BSD weights for normal maps, `(w1, w2) = (1.5, 0.5)`.
+    pub fn paper_normals() -> Self {
+        GuidanceMethod::Bsd { w1: 1.5, w2: 0.5 }
+    }
+
+    /// Checks the weights and builds the guidance.
+    pub fn build(&self) -> Result<Box<dyn Guidance>, DistillError> {
+        let finite = |name: &'static str, value: f32| {
+            if value.is_finite() {
+                Ok(())
+            } else {
+                Err(DistillError::NonFiniteWeight { name, value })
+            }
+        };
+        Ok(match *self {
+            GuidanceMethod::Sds { guidance_scale } => {
+                finite("guidance_scale", guidance_scale)?;
+                Box::new(Sds { guidance_scale })
+            }
+            GuidanceMethod::Csd { w1, w2, w3 } => {
+                finite("w1", w1)?;
+                finite("w2", w2)?;
+                if let Some(w3) = w3 {
+                    finite("w3", w3)?;
+                }
+                Box::new(Csd::new(w1, w2, w3))
+            }
+            GuidanceMethod::Bsd { w1, w2 } => {
+                finite("w1", w1)?;
+                finite("w2", w2)?;
+                Box::new(Bsd { w1, w2 })
+            }
+        })
+    }
+}

@@ -1,0 +1,48 @@
+//! Score distillation (SDS, CSD, Balanced Score Distillation) as gradients into rendered
+//! images, through an inpainting diffusion prior.
+//!
+//! - [`guidance`]: the one [`Guidance`] interface; one file per method ([`sds`], [`csd`],
+//!   [`bsd`]); each step is ONE batched U-Net call (SDS and BSD batch 2, CSD batch 3).
+//! - [`eps`]: the model interfaces ([`InpaintEpsPredictor`], [`LatentEncoder`]).
+//! - [`step`]: [`ScoreDistiller`], one step at latent resolution: `g = w(t) * direction`,
+//!   masked at latent resolution, non-finite values zeroed, optionally clamped, injected as
+//!   `(latents * g.detach()).sum()` so that autodiff runs through the encoder only.
+//! - [`timestep`]: `t` uniform in `[0.02, 0.98]` or the reference's annealed schedule, and
+//!   `w(t)`; [`alphas`]: the noise schedule.
+//! - [`prior_input`], [`conditioning`], [`view_step`]: crop/resize/paste of the render,
+//!   cached view and prompt conditioning, the step on a rendered view.
+//! - [`sd_adapter`]: the crate's U-Net, VAE encoder and CLIP behind those interfaces, and
+//!   [`sd_adapter::SdPrior`], which loads them from a diffusers folder.
+
+pub mod alphas;
+pub mod bsd;
+pub mod conditioning;
+pub mod config;
+pub mod csd;
+pub mod diagnostics;
+pub mod eps;
+pub mod error;
+pub mod gradient;
+pub mod guidance;
+pub mod noise;
+pub mod prior_input;
+pub mod sd_adapter;
+pub mod sds;
+pub mod step;
+pub mod timestep;
+pub mod view_step;
+
+pub use alphas::AlphasCumprod;
+pub use bsd::Bsd;
+pub use conditioning::{PromptCache, PromptEncoder, ViewCache, ViewConditioning};
+pub use config::{DistillConfig, Prompts};
+pub use csd::Csd;
+pub use diagnostics::StepDiagnostics;
+pub use eps::{EpsBatch, InpaintEpsPredictor, LatentEncoder};
+pub use error::DistillError;
+pub use guidance::{Branch, Guidance, GuidanceMethod};
+pub use prior_input::{MaskBox, PriorInputMode};
+pub use sds::Sds;
+pub use step::{DistillOutput, DistillSettings, LatentTarget, PromptEmbeddings, ScoreDistiller};
+pub use timestep::{TimestepConfig, TimestepSchedule, Weighting};
+pub use view_step::{distill_view, prior_image, PriorModels};

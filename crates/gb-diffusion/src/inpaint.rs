@@ -1,0 +1,285 @@
+//! 2D inpainting with a Stable Diffusion inpainting prior: diffusers'
+//! `StableDiffusionInpaintPipeline` for a 9-channel U-Net (strength 1) with DDIM.
+//!
+//! The U-Net input is `[noisy latent (4), mask at latent size (1), masked-image latent (4)]`.
+//! Classifier-free guidance follows diffusers: `eps = eps_uncond + s * (eps_text -
+//! eps_uncond)`, with the negative prompt as the unconditional input, and none when `s <= 1`.
+//! The masked-image latent is the *mean* of the VAE posterior times `scaling_factor`
+//! (diffusers samples it; with a trained VAE the difference is negligible).
+
+use std::path::Path;
+
+use burn::tensor::{Device, Int, Tensor, TensorData};
+use rand::{Rng, SeedableRng};
+
+use crate::checkpoint::{CheckpointError, DiffusersFolder, WeightVariant};
+use crate::clip::text_model::{load_text_encoder, ClipTextModel};
+use crate::config::{SchedulerConfig, UNet2DConditionConfig};
+use crate::models::{load_unet, load_vae, AutoencoderKL, UNet2DConditionModel};
+use crate::scheduler::{DdimScheduler, SchedulerError};
+use crate::tokenizer::ClipTokenizer;
+
+/// Error of the inpainting sampler.
+#[derive(Debug, thiserror::Error)]
+pub enum InpaintError {
+    /// A component could not be loaded.
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    /// The tokenizer failed.
+    #[error("tokenizer: {0}")]
+    Tokenizer(String),
+    /// The text encoder rejected the ids.
+    #[error("text encoder: {0}")]
+    TextEncoder(String),
+    /// The scheduler rejected a request.
+    #[error(transparent)]
+    Scheduler(#[from] SchedulerError),
+    /// The U-Net is not an inpainting U-Net.
+    #[error("{path}: in_channels = {found}, an inpainting U-Net needs 9 (4 latent + 1 mask + 4 masked-image latent)")]
+    NotInpainting {
+        /// The U-Net config file.
+        path: String,
+        /// Its `in_channels`.
+        found: usize,
+    },
+    /// Image and mask disagree, or the size does not fit the VAE.
+    #[error("{0}")]
+    Size(String),
+}
+
+/// A loaded inpainting prior: tokenizer, text encoder, U-Net, VAE and DDIM schedule.
+pub struct InpaintPrior {
+    /// CLIP tokenizer of `tokenizer/`.
+    pub tokenizer: ClipTokenizer,
+    /// CLIP text encoder of `text_encoder/`.
+    pub text_encoder: ClipTextModel,
+    /// The 9-channel U-Net of `unet/`.
+    pub unet: UNet2DConditionModel,
+    /// Its config.
+    pub unet_config: UNet2DConditionConfig,
+    /// The VAE of `vae/`.
+    pub vae: AutoencoderKL,
+    /// Image-to-latent down-sampling factor.
+    pub vae_scale_factor: usize,
+    /// `scheduler/scheduler_config.json` (SD-1.5 DDIM defaults when absent).
+    pub scheduler_config: SchedulerConfig,
+    /// The device everything runs on (no autodiff).
+    pub device: Device,
+}
+
+impl InpaintPrior {
+    /// Loads every component of a diffusers inpainting folder onto `device`.
+    pub fn load(root: &Path, device: &Device) -> Result<Self, InpaintError> {
+        let folder = DiffusersFolder::open(root)?;
+        let tokenizer = ClipTokenizer::from_dir(&folder.component_dir("tokenizer")?)
+            .map_err(|e| InpaintError::Tokenizer(e.to_string()))?;
+        let text_encoder = load_text_encoder(&folder, WeightVariant::Auto, device)
+            .map_err(|e| InpaintError::TextEncoder(e.to_string()))?;
+        let (unet, unet_config) = load_unet(root, device)?;
+        if unet_config.in_channels != 9 {
+            return Err(InpaintError::NotInpainting {
+                path: root.join("unet/config.json").display().to_string(),
+                found: unet_config.in_channels,
+            });
+        }
+        let (vae, vae_config) = load_vae(root, device)?;
+        let sched_path = root.join("scheduler/scheduler_config.json");
+        let scheduler_config = if sched_path.is_file() {
+            SchedulerConfig::from_file(&sched_path).map_err(CheckpointError::from)?
+        } else {
+            SchedulerConfig::default()
+        };
+        Ok(Self {
+            tokenizer,
+            text_encoder,
+            unet,
+            unet_config,
+            vae,
+            vae_scale_factor: vae_config.scale_factor(),
+            scheduler_config,
+            device: device.clone(),
+        })
+    }
+
+    /// Text embeddings `[n, 77, d]` of `prompts` (`last_hidden_state`).
+    pub fn encode_prompts(&self, prompts: &[&str]) -> Result<Tensor<3>, InpaintError> {
+        let mut rows = Vec::with_capacity(prompts.len());
+        for p in prompts {
+            let ids = self
+                .tokenizer
+                .encode(p)
+                .map_err(|e| InpaintError::Tokenizer(e.to_string()))?;
+            rows.push(ids.into_iter().map(i64::from).collect::<Vec<i64>>());
+        }
+        let ids: Tensor<2, Int> = self
+            .text_encoder
+            .ids_tensor(&rows, &self.device)
+            .map_err(|e| InpaintError::TextEncoder(e.to_string()))?;
+        Ok(self.text_encoder.forward(ids))
+    }
+}
+
+/// One inpainting request. Images are `[h, w, 3]` / `[h, w]` row-major in `[0, 1]`.
+#[derive(Debug, Clone)]
+pub struct InpaintRequest {
+    /// Width of image and mask.
+    pub width: usize,
+    /// Height of image and mask.
+    pub height: usize,
+    /// RGB values in `[0, 1]`, `height * width * 3`.
+    pub rgb: Vec<f32>,
+    /// Mask values in `[0, 1]` (>= 0.5 is repainted), `height * width`.
+    pub mask: Vec<f32>,
+    /// The prompt.
+    pub prompt: String,
+    /// The negative prompt (the unconditional input of the guidance).
+    pub negative_prompt: String,
+    /// DDIM steps.
+    pub steps: usize,
+    /// Guidance scale `s`.
+    pub guidance: f64,
+    /// Seed of the initial noise.
+    pub seed: u64,
+    /// Initial latents `[1, 4, h / f, w / f]` (overrides `seed`; for parity runs).
+    pub init_latents: Option<Vec<f32>>,
+}
+
+/// The prepared conditioning: latent-size binary mask and scaled masked-image latent.
+pub struct InpaintConditioning {
+    /// `[1, 1, h / f, w / f]`, 1 where the image is repainted.
+    pub mask_latent: Tensor<4>,
+    /// `vae.encode(image * (mask < 0.5)).mean * scaling_factor`, `[1, 4, h / f, w / f]`.
+    pub masked_image_latents: Tensor<4>,
+}
+
+/// Mask, masked image and its latent as diffusers prepares them: the mask is binarised at
+/// 0.5, the masked image is the image in `[-1, 1]` with the masked pixels set to 0, and the
+/// latent-size mask is nearest-neighbour sampled (`F.interpolate`, pixel `(i f, j f)`).
+pub fn prepare_conditioning(
+    prior: &InpaintPrior,
+    req: &InpaintRequest,
+) -> Result<InpaintConditioning, InpaintError> {
+    let (w, h, f) = (req.width, req.height, prior.vae_scale_factor);
+    if req.rgb.len() != w * h * 3 || req.mask.len() != w * h {
+        return Err(InpaintError::Size(format!(
+            "image has {} values and mask {} for {w}x{h}",
+            req.rgb.len(),
+            req.mask.len()
+        )));
+    }
+    if w % f != 0 || h % f != 0 || w == 0 || h == 0 {
+        return Err(InpaintError::Size(format!(
+            "image size {w}x{h} must be a positive multiple of the VAE factor {f}"
+        )));
+    }
+    let binary: Vec<f32> = req
+        .mask
+        .iter()
+        .map(|&m| if m >= 0.5 { 1.0 } else { 0.0 })
+        .collect();
+    let mut masked = vec![0f32; 3 * h * w];
+    for y in 0..h {
+        for x in 0..w {
+            let keep = binary[y * w + x] < 0.5;
+            for c in 0..3 {
+                let v = req.rgb[(y * w + x) * 3 + c] * 2.0 - 1.0;
+                masked[c * h * w + y * w + x] = if keep { v } else { 0.0 };
+            }
+        }
+    }
+    let (lh, lw) = (h / f, w / f);
+    let mut small = Vec::with_capacity(lh * lw);
+    for y in 0..lh {
+        for x in 0..lw {
+            small.push(binary[(y * f) * w + x * f]);
+        }
+    }
+    let device = &prior.device;
+    let masked = Tensor::<4>::from_data(TensorData::new(masked, [1, 3, h, w]), device);
+    let masked_image_latents = prior
+        .vae
+        .encode_mean(masked)
+        .mul_scalar(prior.vae.scaling_factor);
+    Ok(InpaintConditioning {
+        mask_latent: Tensor::from_data(TensorData::new(small, [1, 1, lh, lw]), device),
+        masked_image_latents,
+    })
+}
+
+/// Standard-normal values from a seeded ChaCha8 generator (Box-Muller), identical on
+/// every backend.
+pub fn seeded_normal(n: usize, seed: u64) -> Vec<f32> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut out = Vec::with_capacity(n + 1);
+    while out.len() < n {
+        let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
+        let u2: f64 = rng.random::<f64>();
+        let r = (-2.0 * u1.ln()).sqrt();
+        let a = 2.0 * std::f64::consts::PI * u2;
+        out.push((r * a.cos()) as f32);
+        out.push((r * a.sin()) as f32);
+    }
+    out.truncate(n);
+    out
+}
+
+/// Runs DDIM inpainting and returns the image `[1, 3, h, w]` in `[0, 1]`. `on_step` is
+/// called after each step with its index and timestep.
+pub fn inpaint(
+    prior: &InpaintPrior,
+    req: &InpaintRequest,
+    mut on_step: impl FnMut(usize, usize),
+) -> Result<Tensor<4>, InpaintError> {
+    let cond = prepare_conditioning(prior, req)?;
+    let f = prior.vae_scale_factor;
+    let (lh, lw) = (req.height / f, req.width / f);
+    let device = &prior.device;
+    let init = match &req.init_latents {
+        Some(v) if v.len() == 4 * lh * lw => v.clone(),
+        Some(v) => {
+            return Err(InpaintError::Size(format!(
+                "initial latents have {} values, expected 4x{lh}x{lw}",
+                v.len()
+            )))
+        }
+        None => seeded_normal(4 * lh * lw, req.seed),
+    };
+    let mut scheduler = DdimScheduler::new(prior.scheduler_config.clone());
+    scheduler.set_timesteps(req.steps)?;
+    // DDIM's init_noise_sigma is 1.
+    let mut latents = Tensor::<4>::from_data(TensorData::new(init, [1, 4, lh, lw]), device);
+
+    let cfg = req.guidance > 1.0;
+    let (context, batch) = if cfg {
+        let ctx = prior.encode_prompts(&[req.negative_prompt.as_str(), req.prompt.as_str()])?;
+        (ctx, 2)
+    } else {
+        (prior.encode_prompts(&[req.prompt.as_str()])?, 1)
+    };
+    let mask = cond.mask_latent.repeat_dim(0, batch);
+    let mil = cond.masked_image_latents.repeat_dim(0, batch);
+    for (i, &t) in scheduler.timesteps.clone().iter().enumerate() {
+        let input = Tensor::cat(
+            vec![
+                latents.clone().repeat_dim(0, batch),
+                mask.clone(),
+                mil.clone(),
+            ],
+            1,
+        );
+        let eps = prior.unet.forward(input, &[t as f32], context.clone());
+        let eps = if cfg {
+            let uncond = eps.clone().narrow(0, 0, 1);
+            let text = eps.narrow(0, 1, 1);
+            uncond.clone() + (text - uncond).mul_scalar(req.guidance)
+        } else {
+            eps
+        };
+        latents = scheduler.step(eps, t, latents)?;
+        on_step(i, t);
+    }
+    let image = prior
+        .vae
+        .decode(latents.div_scalar(prior.vae.scaling_factor));
+    Ok(image.mul_scalar(0.5).add_scalar(0.5).clamp(0.0, 1.0))
+}

@@ -1,0 +1,19 @@
+//! LoRA: reading diffusers/PEFT and kohya files, attaching them to Burn modules through
+//! burn's reparameterisation (`LoraAdapter` on linear weights, [`ConvLoraAdapter`] on
+//! convolution kernels), writing the diffusers/PEFT format, and merging into the weights.
+//!
+//! Order of use: load the base weights first (`checkpoint::load_module`), then
+//! [`apply_lora`]; [`merge_lora`] folds the adapters into dense weights for inference.
+
+pub mod apply;
+pub mod conv_adapter;
+pub mod error;
+pub mod file;
+pub mod tensor_io;
+pub mod write;
+
+pub use apply::{apply_lora, merge_lora, LoraComponent};
+pub use conv_adapter::ConvLoraAdapter;
+pub use error::LoraError;
+pub use file::{LoraEntry, LoraFile};
+pub use write::{collect_lora, write_peft_lora, CollectedLora, LoraExport};

@@ -1,0 +1,172 @@
+//! Disparity maps for D-PSNR (and D-FID): reading, and the 8-bit convention of the reference.
+//!
+//! Convention (the reference evaluation, SPIn-NeRF / nerf-pytorch, which saves
+//! `to8b(disp / np.max(disp))`):
+//! 1. non-finite or negative disparities are set to 0;
+//! 2. the map is divided by its own maximum (per image; a maximum of 0 is an error);
+//! 3. it is quantised with nerf-pytorch's `to8b`: `uint8(255 * clip(d, 0, 1))`, i.e.
+//!    **truncation**, computed in `f64`;
+//! 4. the 8-bit value is replicated to three channels and read back as `v / 255` in `f32`,
+//!    like any 8-bit RGB image, so PSNR/FID then run on it unchanged.
+//!
+//! D-PSNR is [`crate::image_metrics::psnr`] on two such images (data range 1, equal to
+//! scikit-image's `peak_signal_noise_ratio(gt8, pred8, data_range=255)`).
+//!
+//! Files: `.npy` (float32 or float64, shape `[h, w]` or `[h, w, 1]`, C or Fortran order) hold
+//! raw values; `.png` / `.jpg` are read as grey and scaled to [0, 1] first (only the ratio to
+//! the maximum matters). With [`DepthKind::Depth`] the values are depths and the disparity is
+//! `1 / depth` where the depth is positive and finite, 0 elsewhere.
+
+use std::path::{Path, PathBuf};
+
+use gb_core::RgbImage;
+
+use crate::error::MetricError;
+use crate::image_metrics::{psnr, Region};
+
+/// A single-channel map, row-major `[height, width]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScalarMap {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// `width * height` values.
+    pub data: Vec<f32>,
+}
+
+/// What a depth file holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DepthKind {
+    /// Disparity (inverse depth), used as is.
+    #[default]
+    Disparity,
+    /// Metric or relative depth; converted with `1 / depth`.
+    Depth,
+}
+
+/// A depth or disparity file could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum DisparityReadError {
+    /// The file could not be read or parsed.
+    #[error("{path}: cannot read depth/disparity map: {reason}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        reason: String,
+    },
+}
+
+/// Reads a depth or disparity map (`.npy` or an image file) and returns disparity.
+pub fn read_disparity(path: &Path, kind: DepthKind) -> Result<ScalarMap, DisparityReadError> {
+    let err = |reason: String| DisparityReadError::Read { path: path.to_path_buf(), reason };
+    let is_npy = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    let mut map = if is_npy {
+        let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
+        read_npy(&bytes).map_err(err)?
+    } else {
+        let (width, height, data) = gb_core::read_gray(path).map_err(|e| err(e.to_string()))?;
+        ScalarMap { width, height, data }
+    };
+    if kind == DepthKind::Depth {
+        for v in &mut map.data {
+            *v = if v.is_finite() && *v > 0.0 { 1.0 / *v } else { 0.0 };
+        }
+    }
+    Ok(map)
+}
+
+fn read_npy(bytes: &[u8]) -> Result<ScalarMap, String> {
+    let npy = npyz::NpyFile::new(bytes).map_err(|e| e.to_string())?;
+    let shape: Vec<usize> = npy.shape().iter().map(|&s| s as usize).collect();
+    let fortran = matches!(npy.order(), npyz::Order::Fortran);
+    let (height, width) = match shape.as_slice() {
+        [h, w] | [h, w, 1] => (*h, *w),
+        other => return Err(format!("expected shape [h, w] or [h, w, 1], found {other:?}")),
+    };
+    let dtype = match npy.dtype() {
+        npyz::DType::Plain(ts) => ts.to_string(),
+        other => other.descr(),
+    };
+    let values: Vec<f32> = match dtype.as_str() {
+        "<f4" | ">f4" => npy.into_vec::<f32>().map_err(|e| e.to_string())?,
+        "<f8" | ">f8" => npy.into_vec::<f64>().map_err(|e| e.to_string())?.into_iter().map(|v| v as f32).collect(),
+        other => return Err(format!("expected float32 or float64 values, found dtype {other}")),
+    };
+    let data = if fortran {
+        let mut c = vec![0.0; width * height];
+        for y in 0..height {
+            for x in 0..width {
+                c[y * width + x] = values[x * height + y];
+            }
+        }
+        c
+    } else {
+        values
+    };
+    Ok(ScalarMap { width, height, data })
+}
+
+/// The reference's 8-bit, 3-channel rendering of a disparity map (see the module docs).
+pub fn disparity_to_rgb8(disp: &ScalarMap) -> Result<RgbImage, MetricError> {
+    let expected = disp.width * disp.height;
+    if disp.data.len() != expected {
+        return Err(MetricError::BadBuffer {
+            which: "disparity",
+            got: disp.data.len(),
+            expected,
+            width: disp.width,
+            height: disp.height,
+            channels: 1,
+        });
+    }
+    let clean = |v: f32| if v.is_finite() && v > 0.0 { f64::from(v) } else { 0.0 };
+    let max = disp.data.iter().map(|&v| clean(v)).fold(0.0, f64::max);
+    if max <= 0.0 {
+        return Err(MetricError::InvalidInput {
+            what: "disparity map",
+            reason: "its maximum is not positive, so it cannot be normalised by it".into(),
+        });
+    }
+    let mut data = Vec::with_capacity(expected * 3);
+    for &v in &disp.data {
+        let q = (255.0 * (clean(v) / max).clamp(0.0, 1.0)).floor() as u8;
+        let f = f32::from(q) / 255.0;
+        data.extend_from_slice(&[f, f, f]);
+    }
+    Ok(RgbImage { width: disp.width, height: disp.height, data })
+}
+
+/// D-PSNR: PSNR between the 8-bit renderings of two disparity maps over `region`.
+pub fn d_psnr(pred: &ScalarMap, gt: &ScalarMap, region: &Region) -> Result<f64, MetricError> {
+    psnr(&disparity_to_rgb8(pred)?, &disparity_to_rgb8(gt)?, region)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normalises_by_the_maximum_and_truncates() {
+        let m = ScalarMap { width: 4, height: 1, data: vec![2.0, 1.0, 0.999, f32::NAN] };
+        let img = disparity_to_rgb8(&m).unwrap();
+        let u8s: Vec<u8> = img.data.iter().step_by(3).map(|v| (v * 255.0).round() as u8).collect();
+        // 255 * 0.5 = 127.5 -> 127 (truncated), 255 * 0.4995 = 127.37 -> 127.
+        assert_eq!(u8s, vec![255, 127, 127, 0]);
+        assert_eq!(img.data[0..3], [1.0, 1.0, 1.0]);
+    }
+
+    #[test]
+    fn all_zero_disparity_is_an_error() {
+        let m = ScalarMap { width: 2, height: 1, data: vec![0.0, -1.0] };
+        assert!(matches!(disparity_to_rgb8(&m), Err(MetricError::InvalidInput { .. })));
+    }
+
+    #[test]
+    fn scaled_disparity_gives_infinite_d_psnr() {
+        let a = ScalarMap { width: 3, height: 2, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] };
+        let b = ScalarMap { data: a.data.iter().map(|v| v * 4.0).collect(), ..a.clone() };
+        assert_eq!(d_psnr(&a, &b, &Region::Full).unwrap(), f64::INFINITY);
+    }
+}

@@ -1,0 +1,252 @@
+//! The multiresolution hash encoding of instant-ngp (Müller et al. 2022).
+//!
+//! Definition (mirrored exactly by `tools/nerf_parity/make_fixtures.py`):
+//! - per-level growth `b = exp((ln max_res - ln base_res) / (levels - 1))`;
+//! - level `l` has `scale = base_res * b^l - 1` and `res = ceil(scale) + 1`;
+//! - a point `x` in `[0, 1]^3` (clamped) maps to `pos = x * scale + 0.5`, corner
+//!   `g = floor(pos)` and fraction `f = pos - g`;
+//! - corner `c` (bits `(cx, cy, cz)` of `0..8`, x the lowest bit) has the trilinear weight
+//!   `prod_i (c_i ? f_i : 1 - f_i)` and the table row
+//!   `l * T + index(g + c) mod T`, where `index` is the dense stride index
+//!   `x + y*res + z*res^2` when `res^3 <= T` and otherwise instant-ngp's spatial hash
+//!   `(x * 1) xor (y * 2654435761) xor (z * 805459861)` in wrapping `u32` arithmetic;
+//! - the output is the level features concatenated: `levels * features` values per point.
+//!
+//! Unlike instant-ngp every level owns a full table of `T` rows (simpler addressing, same
+//! values). Lookups (indices and weights) are computed on the CPU, which is exact and
+//! identical on every backend; only the table gather and the weighted sum run as tensor
+//! operations, so gradients reach the table on every backend.
+
+use burn::module::{Module, Param};
+use burn::tensor::{Device, Distribution, Int, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+
+/// Hyper-parameters of the hash encoding.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HashGridConfig {
+    /// Number of resolution levels (reference: 16).
+    pub levels: usize,
+    /// Features per level (reference: 2).
+    pub features_per_level: usize,
+    /// log2 of the table size per level (reference: 19).
+    pub log2_table_size: u32,
+    /// Coarsest grid resolution (reference: 16).
+    pub base_resolution: f32,
+    /// Finest grid resolution (reference: 2048 times the scene bound; 512 for a unit box).
+    pub max_resolution: f32,
+}
+
+impl HashGridConfig {
+    /// Number of output features: `levels * features_per_level`.
+    pub fn output_dim(&self) -> usize {
+        self.levels * self.features_per_level
+    }
+
+    /// Rows per level table.
+    pub fn table_size(&self) -> usize {
+        1usize << self.log2_table_size
+    }
+
+    /// The per-level growth factor `b`.
+    pub fn growth(&self) -> f32 {
+        if self.levels <= 1 {
+            return 1.0;
+        }
+        ((self.max_resolution.ln() - self.base_resolution.ln()) / (self.levels as f32 - 1.0)).exp()
+    }
+
+    /// Initialises a table with instant-ngp's uniform(-1e-4, 1e-4) values.
+    pub fn init(&self, device: &Device) -> HashGrid {
+        let rows = self.levels * self.table_size();
+        let table = Tensor::<2>::random(
+            [rows, self.features_per_level],
+            Distribution::Uniform(-1e-4, 1e-4),
+            device,
+        );
+        HashGrid {
+            table: Param::from_tensor(table),
+            config: *self,
+        }
+    }
+}
+
+/// CPU-side lookups of a batch of points: for each point, level and corner, a table row and
+/// a trilinear weight.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HashLookups {
+    /// Number of points.
+    pub points: usize,
+    /// `points * levels * 8` table rows.
+    pub rows: Vec<i64>,
+    /// `points * levels * 8` trilinear weights.
+    pub weights: Vec<f32>,
+}
+
+/// The spatial hash of instant-ngp, in wrapping `u32` arithmetic.
+pub fn spatial_hash(g: [u32; 3]) -> u32 {
+    g[0] ^ g[1].wrapping_mul(2_654_435_761) ^ g[2].wrapping_mul(805_459_861)
+}
+
+/// Computes the table rows and weights of `points` (coordinates in `[0, 1]`, clamped).
+pub fn hash_lookups(config: &HashGridConfig, points: &[[f32; 3]]) -> HashLookups {
+    let levels = config.levels;
+    let t = config.table_size() as u64;
+    let b = config.growth();
+    let mut rows = Vec::with_capacity(points.len() * levels * 8);
+    let mut weights = Vec::with_capacity(points.len() * levels * 8);
+    for p in points {
+        for l in 0..levels {
+            let scale = config.base_resolution * b.powi(l as i32) - 1.0;
+            let res = scale.ceil() as u64 + 1;
+            let dense = res.saturating_mul(res).saturating_mul(res) <= t;
+            let mut g = [0u32; 3];
+            let mut f = [0f32; 3];
+            for i in 0..3 {
+                let x = if p[i].is_finite() {
+                    p[i].clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let pos = x * scale + 0.5;
+                let fl = pos.floor();
+                g[i] = fl as u32;
+                f[i] = pos - fl;
+            }
+            for c in 0..8u32 {
+                let mut w = 1.0f32;
+                let mut gc = [0u32; 3];
+                for i in 0..3 {
+                    let bit = (c >> i) & 1;
+                    gc[i] = g[i] + bit;
+                    w *= if bit == 1 { f[i] } else { 1.0 - f[i] };
+                }
+                let index = if dense {
+                    (gc[0] as u64 + gc[1] as u64 * res + gc[2] as u64 * res * res) % t
+                } else {
+                    spatial_hash(gc) as u64 % t
+                };
+                rows.push((l as u64 * t + index) as i64);
+                weights.push(w);
+            }
+        }
+    }
+    HashLookups {
+        points: points.len(),
+        rows,
+        weights,
+    }
+}
+
+/// The trainable hash tables: `levels * table_size` rows of `features_per_level` values.
+#[derive(Module, Debug)]
+pub struct HashGrid {
+    /// All level tables stacked: `[levels * T, F]`.
+    pub table: Param<Tensor<2>>,
+    /// The hyper-parameters.
+    #[module(skip)]
+    pub config: HashGridConfig,
+}
+
+impl HashGrid {
+    /// Encodes points from precomputed lookups: `[points, levels * features]`.
+    pub fn encode_lookups(&self, lookups: &HashLookups) -> Tensor<2> {
+        let table = self.table.val();
+        let device = table.device();
+        let (n, l, f) = (
+            lookups.points,
+            self.config.levels,
+            self.config.features_per_level,
+        );
+        if n == 0 {
+            return Tensor::zeros([0, l * f], &device);
+        }
+        let rows = Tensor::<1, Int>::from_data(
+            TensorData::new(lookups.rows.clone(), [n * l * 8]),
+            &device,
+        );
+        let w = Tensor::<4>::from_data(
+            TensorData::new(lookups.weights.clone(), [n, l, 8, 1]),
+            &device,
+        );
+        let gathered = table.select(0, rows).reshape([n, l, 8, f]);
+        (gathered * w).sum_dim(2).reshape([n, l * f])
+    }
+
+    /// Encodes points in `[0, 1]^3`: `[points, levels * features]`.
+    pub fn encode(&self, points: &[[f32; 3]]) -> Tensor<2> {
+        self.encode_lookups(&hash_lookups(&self.config, points))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg() -> HashGridConfig {
+        HashGridConfig {
+            levels: 4,
+            features_per_level: 2,
+            log2_table_size: 10,
+            base_resolution: 4.0,
+            max_resolution: 64.0,
+        }
+    }
+
+    #[test]
+    fn weights_are_a_partition_of_unity_and_rows_in_range() {
+        let c = cfg();
+        let pts = [
+            [0.0, 0.0, 0.0],
+            [0.3, 0.7, 0.11],
+            [1.0, 1.0, 1.0],
+            [f32::NAN, 2.0, -1.0],
+        ];
+        let lk = hash_lookups(&c, &pts);
+        for chunk in lk.weights.chunks(8) {
+            let s: f32 = chunk.iter().sum();
+            assert!((s - 1.0).abs() < 1e-5, "{s}");
+        }
+        for (i, r) in lk.rows.iter().enumerate() {
+            let level = (i / 8) % c.levels;
+            let lo = (level * c.table_size()) as i64;
+            assert!(*r >= lo && *r < lo + c.table_size() as i64);
+        }
+    }
+
+    #[test]
+    fn coarse_level_is_dense_and_fine_level_hashed() {
+        let c = cfg();
+        // level 0: scale 3, res 4, 64 <= 1024 -> dense index
+        let lk = hash_lookups(&c, &[[0.5, 0.5, 0.5]]);
+        // pos = 0.5*3+0.5 = 2.0 -> g = 2, f = 0: corner 0 has weight 1
+        assert_eq!(lk.rows[0], 2 + 2 * 4 + 2 * 16);
+        assert!((lk.weights[0] - 1.0).abs() < 1e-6);
+        // level 3: scale 63, res 64 -> hashed
+        let g = [32u32, 32, 32];
+        assert_eq!(
+            lk.rows[3 * 8],
+            (3 * 1024 + spatial_hash(g) as u64 % 1024) as i64
+        );
+    }
+
+    #[test]
+    fn encoding_interpolates_table_values() {
+        let c = cfg();
+        let device = gb_core::BackendKind::Flex.device();
+        let grid = c.init(&device);
+        let p = [[0.21f32, 0.43, 0.77]];
+        let out: Vec<f32> = grid.encode(&p).into_data().try_to_vec::<f32>().unwrap();
+        let table: Vec<f32> = grid.table.val().into_data().try_to_vec::<f32>().unwrap();
+        let lk = hash_lookups(&c, &p);
+        for l in 0..c.levels {
+            for f in 0..2 {
+                let mut e = 0.0;
+                for k in 0..8 {
+                    let i = l * 8 + k;
+                    e += lk.weights[i] * table[lk.rows[i] as usize * 2 + f];
+                }
+                assert!((out[l * 2 + f] - e).abs() < 1e-9, "level {l}");
+            }
+        }
+    }
+}

@@ -1,0 +1,135 @@
+//! Whole-image rendering without autodiff, in ray chunks: colour, depth, opacity and
+//! camera-space normals.
+
+use burn::module::Module;
+use burn::tensor::{Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+
+use super::normals::{depth_to_normals, Intrinsics, PlaneFitConfig};
+use super::rays::{all_pixels, camera_rays};
+use super::{density_gradient_normals, render_samples, Background};
+use crate::field::NerfField;
+use crate::sampler::{sample_rays, OccupancyGrid, SceneSpace};
+use crate::scene::Camera;
+
+/// Where normals come from.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum NormalSource {
+    /// Local plane fit to the rendered depth (MVIP-NeRF / GB-NeRF).
+    PlaneFit(PlaneFitConfig),
+    /// Central finite differences of the density, with this world-space step.
+    DensityGradient {
+        /// Finite-difference step in world units.
+        step: f32,
+    },
+}
+
+/// A rendered image.
+#[derive(Debug, Clone)]
+pub struct ImageRender {
+    /// Colour.
+    pub rgb: gb_core::RgbImage,
+    /// Z-depth per pixel.
+    pub depth: Vec<f32>,
+    /// Accumulated opacity per pixel.
+    pub opacity: Vec<f32>,
+    /// Unit camera-space normals per pixel (see [`super::normals`]).
+    pub normals: Vec<[f32; 3]>,
+    /// Mean field evaluations per ray.
+    pub evaluations_per_ray: f32,
+}
+
+/// Settings shared by image renders.
+#[derive(Debug, Clone, Copy)]
+pub struct ImageSettings<'a> {
+    /// Scene parameterisation.
+    pub space: &'a SceneSpace,
+    /// Near bound.
+    pub near: f32,
+    /// Far bound.
+    pub far: f32,
+    /// Samples per ray.
+    pub samples_per_ray: usize,
+    /// Empty-space skipping.
+    pub occupancy: Option<&'a OccupancyGrid>,
+    /// Background.
+    pub background: Background,
+    /// Normal source.
+    pub normals: NormalSource,
+    /// Rays per chunk.
+    pub chunk: usize,
+}
+
+/// Renders every pixel of `camera` with a no-grad copy of `field`.
+pub fn render_image(field: &NerfField, camera: &Camera, settings: &ImageSettings) -> ImageRender {
+    let field = field.valid();
+    let pixels = all_pixels(camera.width, camera.height);
+    let n = pixels.len();
+    let mut rgb = Vec::with_capacity(n * 3);
+    let mut depth = Vec::with_capacity(n);
+    let mut opacity = Vec::with_capacity(n);
+    let mut normals = Vec::with_capacity(n);
+    let mut evals = 0usize;
+    for chunk in pixels.chunks(settings.chunk.max(1)) {
+        let rays = camera_rays(camera, chunk, settings.space, settings.near, settings.far);
+        let samples = sample_rays::<rand_chacha::ChaCha8Rng>(
+            &rays,
+            settings.space,
+            settings.samples_per_ray,
+            settings.occupancy,
+            None,
+        );
+        evals += samples.slots.len();
+        let out = render_samples(&field, &samples, settings.background);
+        if let NormalSource::DensityGradient { step } = settings.normals {
+            let nt = density_gradient_normals(
+                &field,
+                settings.space,
+                &samples,
+                out.weights.clone(),
+                out.opacity.clone(),
+                &camera.c2w,
+                step,
+            );
+            let v: Vec<f32> = nt.into_data().try_to_vec::<f32>().unwrap_or_default();
+            normals.extend(v.chunks(3).map(|c| [c[0], c[1], c[2]]));
+        }
+        rgb.extend(out.rgb.into_data().try_to_vec::<f32>().unwrap_or_default());
+        depth.extend(
+            out.depth
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap_or_default(),
+        );
+        opacity.extend(
+            out.opacity
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap_or_default(),
+        );
+    }
+    if let NormalSource::PlaneFit(cfg) = settings.normals {
+        let device = field.device();
+        let d = Tensor::<2>::from_data(
+            TensorData::new(depth.clone(), [camera.height, camera.width]),
+            &device,
+        );
+        let v: Vec<f32> = depth_to_normals(d, Intrinsics::of(camera), cfg)
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap_or_default();
+        normals = v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+    }
+    ImageRender {
+        rgb: gb_core::RgbImage {
+            width: camera.width,
+            height: camera.height,
+            data: rgb,
+        },
+        depth,
+        opacity,
+        normals,
+        evaluations_per_ray: evals as f32 / n.max(1) as f32,
+    }
+}

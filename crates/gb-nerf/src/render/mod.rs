@@ -1,0 +1,119 @@
+//! Rendering: rays through any pixel set, field evaluation on the samples that matter, and
+//! stable volume compositing into colour, depth, disparity, opacity and normals.
+
+pub mod image;
+pub mod normals;
+pub mod rays;
+pub mod volume;
+
+use burn::tensor::{Int, Tensor, TensorData};
+use rand::Rng;
+
+use crate::field::NerfField;
+use crate::sampler::{sample_rays, OccupancyGrid, RayBatch, SampleSet, SceneSpace};
+
+pub use image::{render_image, ImageRender};
+pub use normals::{depth_to_normals, normals_to_image, Intrinsics, PlaneFitConfig};
+pub use volume::{composite, Background, VolumeOutput};
+
+/// Expands per-sample values `[M, C]` of the evaluated samples to the dense `[R * S, C]`
+/// layout, with zeros for the skipped samples (differentiable: a gather).
+fn expand_dense<const D: usize>(values: Tensor<D>, samples: &SampleSet) -> Tensor<D> {
+    let device = values.device();
+    let m = samples.slots.len();
+    let dense = samples.rays * samples.samples;
+    let mut map = vec![m as i64; dense];
+    for (k, slot) in samples.slots.iter().enumerate() {
+        map[*slot as usize] = k as i64;
+    }
+    let mut zero_shape = values.dims();
+    zero_shape[0] = 1;
+    let padded = Tensor::cat(vec![values, Tensor::zeros(zero_shape, &device)], 0);
+    padded.select(
+        0,
+        Tensor::<1, Int>::from_data(TensorData::new(map, [dense]), &device),
+    )
+}
+
+/// Evaluates `field` on the evaluated samples of `samples` and composites them.
+pub fn render_samples(
+    field: &NerfField,
+    samples: &SampleSet,
+    background: Background,
+) -> VolumeOutput {
+    let device = field.device();
+    let (r, s) = (samples.rays, samples.samples);
+    let (sigma, rgb) = field.forward(&samples.points, &samples.view_dirs);
+    let sigma = expand_dense(sigma, samples).reshape([r, s]);
+    let rgb = expand_dense(rgb, samples).reshape([r, s, 3]);
+    let t = Tensor::<2>::from_data(TensorData::new(samples.t.clone(), [r, s]), &device);
+    let delta = Tensor::<2>::from_data(TensorData::new(samples.delta.clone(), [r, s]), &device);
+    composite(sigma, rgb, t, delta, background)
+}
+
+/// Samples `rays` (jittered when `rng` is given, skipping empty cells of `occupancy`) and
+/// renders them. The outputs keep the autodiff graph of `field`.
+pub fn render_rays<R: Rng>(
+    field: &NerfField,
+    space: &SceneSpace,
+    rays: &RayBatch,
+    samples_per_ray: usize,
+    occupancy: Option<&OccupancyGrid>,
+    background: Background,
+    rng: Option<&mut R>,
+) -> (VolumeOutput, SampleSet) {
+    let samples = sample_rays(rays, space, samples_per_ray, occupancy, rng);
+    let out = render_samples(field, &samples, background);
+    (out, samples)
+}
+
+/// Camera-space normals `[R, 3]` from the density gradient (central finite differences with
+/// world step `step` at every evaluated sample, `n = -grad sigma / |grad sigma|`), averaged
+/// with the compositing weights `[R, S]` and rotated by the transpose of the camera rotation
+/// `c2w`. The missing opacity adds the background normal `(0, 0, 1)`; see
+/// [`normals`] for the convention.
+pub fn density_gradient_normals(
+    field: &NerfField,
+    space: &SceneSpace,
+    samples: &SampleSet,
+    weights: Tensor<2>,
+    opacity: Tensor<1>,
+    c2w: &[[f32; 4]; 3],
+    step: f32,
+) -> Tensor<2> {
+    let device = field.device();
+    let (r, s) = (samples.rays, samples.samples);
+    let m = samples.world.len();
+    let mut pts = Vec::with_capacity(6 * m);
+    for axis in 0..3 {
+        for sign in [1.0f32, -1.0] {
+            for (p, q) in samples.world.iter().zip(&samples.points) {
+                let mut o = *p;
+                o[axis] += sign * step;
+                pts.push(space.to_field(o).unwrap_or(*q));
+            }
+        }
+    }
+    let d = field.density(&pts).reshape([6, m]);
+    let grad: Vec<Tensor<2>> = (0..3)
+        .map(|a| {
+            (d.clone().narrow(0, 2 * a, 1) - d.clone().narrow(0, 2 * a + 1, 1)).reshape([m, 1])
+        })
+        .collect();
+    let grad = Tensor::cat(grad, 1).mul_scalar(-0.5 / step); // [M, 3] = -grad
+    let len = grad.clone().square().sum_dim(1).add_scalar(1e-20).sqrt();
+    let n = grad / len;
+    let n = expand_dense(n, samples).reshape([r, s, 3]);
+    let n_world = (n * weights.unsqueeze_dim::<3>(2))
+        .sum_dim(1)
+        .reshape([r, 3]);
+    let rot: Vec<f32> = (0..3)
+        .flat_map(|i| (0..3).map(move |j| c2w[i][j]))
+        .collect();
+    let rot = Tensor::<2>::from_data(TensorData::new(rot, [3, 3]), &device);
+    let n_cam = n_world.matmul(rot);
+    let bg = Tensor::<2>::from_data(TensorData::new(vec![0.0f32, 0.0, 1.0], [1, 3]), &device);
+    let n_cam = n_cam + opacity.neg().add_scalar(1.0).reshape([r, 1]) * bg;
+    let len = n_cam.clone().square().sum_dim(1).add_scalar(1e-12).sqrt();
+    n_cam / len
+}

@@ -1,0 +1,305 @@
+//! The built-in scenes: `stairs` (a textured staircase with an object standing on a step)
+//! and `fence` (a periodic picket fence in front of a brick wall, with an object in front).
+//! World axes: y up; the cameras look roughly along -z. Units: metres, loosely.
+
+use super::geometry::{Geometry, V3};
+use super::texture::{Rgb, Texture};
+use super::world::{Shape, World};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Which built-in scene.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SceneName {
+    /// A textured staircase with an object (a vase) standing on a step.
+    Stairs,
+    /// A periodic fence in front of a wall, with an object (a ball on a crate) in front.
+    Fence,
+}
+
+impl SceneName {
+    /// Every scene.
+    pub const ALL: [SceneName; 2] = [SceneName::Stairs, SceneName::Fence];
+
+    /// Its command-line name.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            SceneName::Stairs => "stairs",
+            SceneName::Fence => "fence",
+        }
+    }
+}
+
+impl std::fmt::Display for SceneName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for SceneName {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "stairs" => Ok(SceneName::Stairs),
+            "fence" => Ok(SceneName::Fence),
+            other => Err(format!(
+                "unknown procedural scene '{other}' (expected stairs or fence)"
+            )),
+        }
+    }
+}
+
+/// How the cameras move: a forward-facing arc around a target point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rig {
+    /// The point the cameras look at.
+    pub target: V3,
+    /// Distance from the target.
+    pub radius: f64,
+    /// Azimuth range in degrees (0 = looking along -z).
+    pub azimuth_deg: (f64, f64),
+    /// Mean elevation in degrees (positive = looking down).
+    pub elevation_deg: f64,
+    /// Horizontal field of view in degrees.
+    pub hfov_deg: f64,
+}
+
+/// A built scene: the world, the camera rig and captions.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneSpec {
+    /// Shapes and light.
+    pub world: World,
+    /// Camera arc.
+    pub rig: Rig,
+    /// Caption of a view with the object.
+    pub caption_with_object: String,
+    /// Caption of a view without the object.
+    pub caption_without_object: String,
+}
+
+const PALETTE: [(&str, Rgb); 6] = [
+    ("red", [0.82, 0.14, 0.12]),
+    ("blue", [0.16, 0.32, 0.86]),
+    ("yellow", [0.92, 0.80, 0.14]),
+    ("green", [0.18, 0.68, 0.24]),
+    ("purple", [0.56, 0.22, 0.72]),
+    ("orange", [0.95, 0.50, 0.10]),
+];
+
+fn shape(geometry: Geometry, texture: Texture) -> Shape {
+    Shape {
+        geometry,
+        texture,
+        object: false,
+    }
+}
+
+fn jitter(rng: &mut ChaCha8Rng, c: Rgb, amount: f64) -> Rgb {
+    let mut out = c;
+    for v in &mut out {
+        *v = (*v + rng.random_range(-amount..amount)).clamp(0.0, 1.0);
+    }
+    out
+}
+
+/// Builds a scene for a seed.
+pub fn build(name: SceneName, seed: u64) -> SceneSpec {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6762_6e65_7266_0000);
+    let s32 = |rng: &mut ChaCha8Rng| rng.random::<u32>();
+    match name {
+        SceneName::Stairs => stairs(&mut rng, s32),
+        SceneName::Fence => fence(&mut rng, s32),
+    }
+}
+
+fn stairs(rng: &mut ChaCha8Rng, s32: impl Fn(&mut ChaCha8Rng) -> u32) -> SceneSpec {
+    let mut shapes = vec![
+        shape(
+            Geometry::Plane {
+                normal: [0.0, 1.0, 0.0],
+                offset: 0.0,
+            },
+            Texture::Checker {
+                a: jitter(rng, [0.72, 0.70, 0.66], 0.05),
+                b: jitter(rng, [0.35, 0.33, 0.31], 0.05),
+                cell: 0.5,
+            },
+        ),
+        shape(
+            Geometry::Plane {
+                normal: [0.0, 0.0, 1.0],
+                offset: -3.0,
+            },
+            Texture::Bricks {
+                brick: jitter(rng, [0.62, 0.30, 0.22], 0.05),
+                mortar: [0.80, 0.78, 0.74],
+                width: 0.5,
+                height: 0.2,
+                seed: s32(rng),
+            },
+        ),
+    ];
+    let (steps, rise, run, z0) = (5usize, 0.25, 0.5, 1.0);
+    let wood_dark = jitter(rng, [0.45, 0.28, 0.14], 0.04);
+    let wood_light = jitter(rng, [0.78, 0.58, 0.36], 0.04);
+    let grain_seed = s32(rng);
+    for i in 0..steps {
+        shapes.push(shape(
+            Geometry::Cuboid {
+                min: [-1.6, 0.0, z0 - (i + 1) as f64 * run],
+                max: [1.6, (i + 1) as f64 * rise, z0 - i as f64 * run],
+            },
+            Texture::Grain {
+                a: wood_dark,
+                b: wood_light,
+                freq: 6.0,
+                seed: grain_seed,
+            },
+        ));
+    }
+    // the object: a vase (cylinder + sphere) standing on step 2 (top y = 0.75, z in [-0.5, 0])
+    let (cname, color) = PALETTE[rng.random_range(0..PALETTE.len())];
+    let x = rng.random_range(-0.35..0.35);
+    let z = -0.25 + rng.random_range(-0.05..0.05);
+    let top = 3.0 * rise;
+    let body = Texture::Noise {
+        a: color,
+        b: jitter(rng, color, 0.15),
+        freq: 9.0,
+        seed: s32(rng),
+    };
+    shapes.push(Shape {
+        geometry: Geometry::Cylinder {
+            x,
+            z,
+            radius: 0.2,
+            y0: top,
+            y1: top + 0.45,
+        },
+        texture: body,
+        object: true,
+    });
+    shapes.push(Shape {
+        geometry: Geometry::Sphere {
+            center: [x, top + 0.62, z],
+            radius: 0.2,
+        },
+        texture: Texture::Checker {
+            a: color,
+            b: [0.95, 0.95, 0.92],
+            cell: 0.08,
+        },
+        object: true,
+    });
+    SceneSpec {
+        world: World::new(shapes),
+        rig: Rig {
+            target: [0.0, 0.75, -0.4],
+            radius: 4.2,
+            azimuth_deg: (-18.0, 18.0),
+            elevation_deg: 18.0,
+            hfov_deg: 50.0,
+        },
+        caption_with_object: format!(
+            "a wooden staircase in front of a brick wall, with a {cname} vase standing on a step"
+        ),
+        caption_without_object: "a wooden staircase in front of a brick wall".into(),
+    }
+}
+
+fn fence(rng: &mut ChaCha8Rng, s32: impl Fn(&mut ChaCha8Rng) -> u32) -> SceneSpec {
+    let mut shapes = vec![
+        shape(
+            Geometry::Plane {
+                normal: [0.0, 1.0, 0.0],
+                offset: 0.0,
+            },
+            Texture::Noise {
+                a: jitter(rng, [0.20, 0.42, 0.14], 0.04),
+                b: jitter(rng, [0.42, 0.62, 0.24], 0.04),
+                freq: 3.0,
+                seed: s32(rng),
+            },
+        ),
+        shape(
+            Geometry::Plane {
+                normal: [0.0, 0.0, 1.0],
+                offset: -4.0,
+            },
+            Texture::Bricks {
+                brick: jitter(rng, [0.58, 0.34, 0.26], 0.05),
+                mortar: [0.78, 0.76, 0.72],
+                width: 0.45,
+                height: 0.18,
+                seed: s32(rng),
+            },
+        ),
+    ];
+    let paint = jitter(rng, [0.93, 0.93, 0.90], 0.03);
+    let paint_dark = [paint[0] * 0.85, paint[1] * 0.85, paint[2] * 0.85];
+    let fence_tex = Texture::Noise {
+        a: paint,
+        b: paint_dark,
+        freq: 5.0,
+        seed: s32(rng),
+    };
+    let (zf, pitch, slat) = (-2.0, 0.3, 0.11);
+    let phase = rng.random_range(0.0..pitch);
+    let mut x = -4.0 + phase;
+    while x < 4.0 {
+        shapes.push(shape(
+            Geometry::Cuboid {
+                min: [x, 0.0, zf - 0.03],
+                max: [x + slat, 1.6, zf + 0.03],
+            },
+            fence_tex,
+        ));
+        x += pitch;
+    }
+    for y in [0.45, 1.25] {
+        shapes.push(shape(
+            Geometry::Cuboid {
+                min: [-4.0, y, zf - 0.09],
+                max: [4.0, y + 0.1, zf - 0.03],
+            },
+            fence_tex,
+        ));
+    }
+    // the object: a ball on a crate, in front of the fence
+    let (cname, color) = PALETTE[rng.random_range(0..PALETTE.len())];
+    let cx = rng.random_range(-0.4..0.4);
+    let cz = -0.9 + rng.random_range(-0.1..0.1);
+    let crate_tex = Texture::Grain {
+        a: [0.40, 0.26, 0.12],
+        b: [0.70, 0.52, 0.30],
+        freq: 8.0,
+        seed: s32(rng),
+    };
+    shapes.push(Shape {
+        geometry: Geometry::Cuboid {
+            min: [cx - 0.3, 0.0, cz - 0.3],
+            max: [cx + 0.3, 0.5, cz + 0.3],
+        },
+        texture: crate_tex,
+        object: true,
+    });
+    shapes.push(Shape {
+        geometry: Geometry::Sphere {
+            center: [cx, 0.8, cz],
+            radius: 0.3,
+        },
+        texture: Texture::Noise {
+            a: color,
+            b: jitter(rng, color, 0.2),
+            freq: 7.0,
+            seed: s32(rng),
+        },
+        object: true,
+    });
+    SceneSpec {
+        world: World::new(shapes),
+        rig: Rig { target: [0.0, 0.7, -1.6], radius: 4.0, azimuth_deg: (-15.0, 15.0), elevation_deg: 8.0, hfov_deg: 55.0 },
+        caption_with_object: format!("a white picket fence in front of a brick wall on a lawn, with a {cname} ball on a wooden crate in front"),
+        caption_without_object: "a white picket fence in front of a brick wall on a lawn".into(),
+    }
+}

@@ -1,0 +1,14 @@
+//! Reconstruction: configuration and presets, training data, losses, the trainer,
+//! checkpoints and the PNG outputs of test views.
+
+pub mod checkpoint;
+pub mod config;
+pub mod data;
+pub mod error;
+pub mod losses;
+pub mod output;
+pub mod trainer;
+
+pub use config::{NerfConfig, RenderSettings, TrainSettings};
+pub use error::NerfError;
+pub use trainer::{FitSummary, StepStats, Trainer};

@@ -1,0 +1,381 @@
+//! The reconstruction trainer: RGB loss on unmasked pixels, disparity loss where depth
+//! exists, Adam with an exponentially decaying learning rate, occupancy-grid updates,
+//! progress bar, atomic checkpoints and resume.
+
+use std::path::Path;
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::store::ModuleRecord;
+use burn::tensor::{Bytes, Tensor, TensorData};
+use gb_core::BackendKind;
+use indicatif::{ProgressBar, ProgressStyle};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::checkpoint::{self, CheckpointMeta, CheckpointParts};
+use super::data::TrainData;
+use super::losses::{disparity_loss, mse, psnr_from_mse};
+use super::{NerfConfig, NerfError};
+use crate::field::NerfField;
+use crate::render::image::{render_image, ImageRender, ImageSettings};
+use crate::render::rays::camera_rays;
+use crate::render::{render_rays, Background};
+use crate::sampler::{sample_rays, OccupancyGrid, RayBatch, SceneSpace};
+use crate::scene::{Camera, Scene};
+
+/// Loss and quality of one training step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepStats {
+    /// Total loss.
+    pub loss: f64,
+    /// PSNR of the RGB loss on the batch, dB.
+    pub psnr: f64,
+    /// Field evaluations per ray (the dense budget is `samples_per_ray`).
+    pub evaluations_per_ray: f32,
+}
+
+/// Summary of a [`Trainer::fit`] run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitSummary {
+    /// Steps run in this call.
+    pub steps_run: usize,
+    /// Wall time of this call, seconds.
+    pub seconds: f64,
+    /// Stats of the last step.
+    pub last: Option<StepStats>,
+    /// Mean field evaluations per ray over the run.
+    pub mean_evaluations_per_ray: f32,
+}
+
+/// The reconstruction state (see the module docs).
+pub struct Trainer {
+    /// The configuration.
+    pub config: NerfConfig,
+    /// Training views and pixels.
+    pub data: TrainData,
+    /// Scene parameterisation.
+    pub space: SceneSpace,
+    /// Near bound.
+    pub near: f32,
+    /// Far bound (also the background depth).
+    pub far: f32,
+    /// Background of empty rays.
+    pub background: Background,
+    /// The field, on the autodiff device.
+    pub field: NerfField,
+    /// Empty-space skipping.
+    pub occupancy: Option<OccupancyGrid>,
+    /// Steps completed.
+    pub step: usize,
+    /// Backend it runs on.
+    pub backend: BackendKind,
+    optimizer: ModuleOptimizer,
+    rng: ChaCha8Rng,
+    has_depth: bool,
+}
+
+impl Trainer {
+    /// A fresh trainer for `scene`.
+    pub fn new(scene: &Scene, config: NerfConfig, backend: BackendKind) -> Result<Self, NerfError> {
+        let data = TrainData::from_scene(scene, config.train.image_downscale)?;
+        if !(scene.near.is_finite() && scene.far.is_finite() && scene.near < scene.far) {
+            return Err(NerfError::Scene {
+                scene: scene.name.clone(),
+                reason: format!("invalid bounds near {} far {}", scene.near, scene.far),
+            });
+        }
+        let device = backend.autodiff_device();
+        device.seed(config.train.seed);
+        let field = config.field.init(&device);
+        let space = SceneSpace::from_scene(scene);
+        let has_depth = data.views.iter().any(|v| v.depth.is_some());
+        let mut trainer = Self {
+            data,
+            space,
+            near: scene.near,
+            far: scene.far,
+            background: Background {
+                color: scene.background,
+                depth: scene.far,
+            },
+            field,
+            occupancy: None,
+            step: 0,
+            backend,
+            optimizer: AdamConfig::new().with_epsilon(1e-15).init(),
+            rng: ChaCha8Rng::seed_from_u64(config.train.seed),
+            has_depth,
+            config,
+        };
+        if let Some(occ) = trainer.config.sampler.occupancy.clone() {
+            let typical = trainer.typical_delta();
+            trainer.occupancy = Some(OccupancyGrid::new(
+                occ.resolution,
+                OccupancyGrid::threshold_for(occ.opacity_threshold, typical),
+            ));
+        }
+        Ok(trainer)
+    }
+
+    /// Mean world-space sample interval over a fixed set of training rays.
+    fn typical_delta(&mut self) -> f32 {
+        let rays = self.batch_rays(256).0;
+        let s = sample_rays::<ChaCha8Rng>(
+            &rays,
+            &self.space,
+            self.config.sampler.samples_per_ray,
+            None,
+            None,
+        );
+        let valid: Vec<f32> = s
+            .delta
+            .iter()
+            .copied()
+            .filter(|d| *d > 0.0 && d.is_finite())
+            .collect();
+        if valid.is_empty() {
+            1.0
+        } else {
+            valid.iter().sum::<f32>() / valid.len() as f32
+        }
+    }
+
+    /// Draws `n` random unmasked training pixels: rays, target colours, and (near-scaled)
+    /// target disparities with their validity.
+    fn batch_rays(&mut self, n: usize) -> (RayBatch, Vec<f32>, Vec<f32>, Vec<f32>) {
+        let mut rays = RayBatch::default();
+        let mut rgb = Vec::with_capacity(n * 3);
+        let mut disp = Vec::with_capacity(n);
+        let mut valid = Vec::with_capacity(n);
+        for _ in 0..n {
+            let p = self.data.pixels[self.rng.random_range(0..self.data.pixels.len())];
+            let v = &self.data.views[p.view as usize];
+            let px = [p.x as f32 + 0.5, p.y as f32 + 0.5];
+            let r = camera_rays(&v.camera, &[px], &self.space, self.near, self.far);
+            rays.origins.extend(r.origins);
+            rays.dirs.extend(r.dirs);
+            rays.near.extend(r.near);
+            rays.far.extend(r.far);
+            rgb.extend_from_slice(&v.image.get(p.x as usize, p.y as usize));
+            let d = v
+                .depth
+                .as_ref()
+                .map(|d| d[p.y as usize * v.image.width + p.x as usize])
+                .filter(|d| d.is_finite() && *d > 0.0);
+            disp.push(d.map_or(0.0, |d| self.near / d));
+            valid.push(if d.is_some() { 1.0 } else { 0.0 });
+        }
+        (rays, rgb, disp, valid)
+    }
+
+    /// One optimisation step.
+    pub fn train_step(&mut self) -> StepStats {
+        let n = self.config.train.rays_per_batch;
+        let (rays, rgb, disp, valid) = self.batch_rays(n);
+        let device = self.field.device();
+        let (out, samples) = render_rays(
+            &self.field,
+            &self.space,
+            &rays,
+            self.config.sampler.samples_per_ray,
+            self.occupancy.as_ref(),
+            self.background,
+            Some(&mut self.rng),
+        );
+        let target = Tensor::<2>::from_data(TensorData::new(rgb, [n, 3]), &device);
+        let rgb_loss = mse(out.rgb, target);
+        let mut loss = rgb_loss.clone();
+        if self.has_depth && self.config.train.depth_weight > 0.0 {
+            let gt = Tensor::<1>::from_data(TensorData::new(disp, [n]), &device);
+            let valid = Tensor::<1>::from_data(TensorData::new(valid, [n]), &device);
+            let dl = disparity_loss(out.disparity, gt, valid, self.near);
+            loss = loss + dl.mul_scalar(self.config.train.depth_weight);
+        }
+        let rgb_mse: f32 = rgb_loss.detach().into_scalar();
+        let loss_value: f32 = loss.clone().detach().into_scalar();
+        let grads = GradientsParams::from_grads(loss.backward(), &self.field);
+        let lr = self.config.lr_at(self.step);
+        self.field = self.optimizer.step(lr, self.field.clone(), grads);
+        self.step += 1;
+        self.maybe_update_occupancy();
+        StepStats {
+            loss: loss_value as f64,
+            psnr: psnr_from_mse(rgb_mse as f64),
+            evaluations_per_ray: samples.evaluations_per_ray(),
+        }
+    }
+
+    fn maybe_update_occupancy(&mut self) {
+        let Some(cfg) = self.config.sampler.occupancy.clone() else {
+            return;
+        };
+        let Some(grid) = self.occupancy.as_mut() else {
+            return;
+        };
+        if self.step >= cfg.warmup_steps && self.step % cfg.update_every == 0 {
+            let valid = self.field.valid();
+            grid.update(&valid, cfg.cells_per_update, cfg.decay, &mut self.rng);
+        }
+    }
+
+    /// Trains until `config.train.steps`, with a progress bar (when `progress`) and a
+    /// checkpoint every `checkpoint_every` steps and at the end (when `checkpoint` is given).
+    pub fn fit(
+        &mut self,
+        checkpoint: Option<&Path>,
+        progress: bool,
+    ) -> Result<FitSummary, NerfError> {
+        let total = self.config.train.steps;
+        let start = Instant::now();
+        let first = self.step;
+        let bar = if progress {
+            ProgressBar::new(total as u64)
+        } else {
+            ProgressBar::hidden()
+        };
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}] {msg}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        bar.set_position(self.step as u64);
+        let mut last = None;
+        let mut evals = 0.0f64;
+        while self.step < total {
+            let s = self.train_step();
+            evals += s.evaluations_per_ray as f64;
+            let done = (self.step - first) as f64;
+            bar.set_position(self.step as u64);
+            bar.set_message(format!(
+                "loss {:.5} psnr {:.2} dB {:.2} it/s evals/ray {:.1}",
+                s.loss,
+                s.psnr,
+                done / start.elapsed().as_secs_f64().max(1e-9),
+                s.evaluations_per_ray
+            ));
+            last = Some(s);
+            let every = self.config.train.checkpoint_every;
+            if let Some(path) = checkpoint {
+                if (every > 0 && self.step % every == 0) || self.step == total {
+                    self.save_checkpoint(path)?;
+                }
+            }
+        }
+        bar.finish();
+        let steps_run = self.step - first;
+        tracing::info!(
+            steps_run,
+            seconds = start.elapsed().as_secs_f64(),
+            "training finished"
+        );
+        Ok(FitSummary {
+            steps_run,
+            seconds: start.elapsed().as_secs_f64(),
+            last,
+            mean_evaluations_per_ray: if steps_run > 0 {
+                (evals / steps_run as f64) as f32
+            } else {
+                0.0
+            },
+        })
+    }
+
+    /// Writes a checkpoint atomically.
+    pub fn save_checkpoint(&self, path: &Path) -> Result<(), NerfError> {
+        let e = |r: String| NerfError::Checkpoint {
+            path: path.to_path_buf(),
+            reason: r,
+        };
+        let model = self
+            .field
+            .clone()
+            .into_record()
+            .into_bytes()
+            .map_err(|x| e(x.to_string()))?;
+        let optimizer = self.optimizer.into_bytes().map_err(|x| e(x.to_string()))?;
+        checkpoint::save(
+            path,
+            &CheckpointParts {
+                meta: CheckpointMeta {
+                    step: self.step,
+                    config: self.config.clone(),
+                    occupancy_threshold: self.occupancy.as_ref().map(|g| g.density_threshold),
+                },
+                model: model.to_vec(),
+                optimizer: optimizer.to_vec(),
+                occupancy: self
+                    .occupancy
+                    .as_ref()
+                    .map(|g| g.density.clone())
+                    .unwrap_or_default(),
+            },
+        )
+    }
+
+    /// Restores a trainer from a checkpoint of the same scene: parameters, optimiser state,
+    /// occupancy grid and step. The random stream restarts from `seed + step`.
+    pub fn resume(scene: &Scene, path: &Path, backend: BackendKind) -> Result<Self, NerfError> {
+        let parts = checkpoint::load(path)?;
+        let e = |r: String| NerfError::Checkpoint {
+            path: path.to_path_buf(),
+            reason: r,
+        };
+        let mut t = Self::new(scene, parts.meta.config.clone(), backend)?;
+        let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(parts.model))
+            .map_err(|x| e(format!("model: {x}")))?;
+        t.field = t
+            .field
+            .clone()
+            .try_load_record(record)
+            .map_err(|x| e(format!("model: {x}")))?;
+        t.optimizer = AdamConfig::new()
+            .with_epsilon(1e-15)
+            .init()
+            .from_bytes(Bytes::from_bytes_vec(parts.optimizer))
+            .map_err(|x| e(format!("optimizer: {x}")))?;
+        if let (Some(grid), Some(thr)) = (t.occupancy.as_mut(), parts.meta.occupancy_threshold) {
+            if parts.occupancy.len() != grid.density.len() {
+                return Err(e(format!(
+                    "occupancy grid has {} cells, config expects {}",
+                    parts.occupancy.len(),
+                    grid.density.len()
+                )));
+            }
+            grid.density = parts.occupancy;
+            grid.density_threshold = thr;
+            let warm = parts.meta.step
+                >= t.config
+                    .sampler
+                    .occupancy
+                    .as_ref()
+                    .map_or(0, |o| o.warmup_steps);
+            for (o, d) in grid.occupied.iter_mut().zip(&grid.density) {
+                *o = !warm || *d > thr;
+            }
+        }
+        t.step = parts.meta.step;
+        t.rng = ChaCha8Rng::seed_from_u64(t.config.train.seed.wrapping_add(t.step as u64));
+        Ok(t)
+    }
+
+    /// Renders a whole image (no autodiff) with the configured normals.
+    pub fn render(&self, camera: &Camera) -> ImageRender {
+        render_image(
+            &self.field,
+            camera,
+            &ImageSettings {
+                space: &self.space,
+                near: self.near,
+                far: self.far,
+                samples_per_ray: self.config.sampler.samples_per_ray,
+                occupancy: self.occupancy.as_ref(),
+                background: self.background,
+                normals: self.config.render.normals,
+                chunk: self.config.render.chunk,
+            },
+        )
+    }
+}

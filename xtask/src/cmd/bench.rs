@@ -1,0 +1,40 @@
+//! `cargo xtask bench <what>`: benchmarks, each writing `bench/results/<what>-*.json` with the
+//! machine named and a reference measured in the same run.
+//!
+//! Adding a benchmark (nerf, unet, ...): write `xtask/src/cmd/bench_<what>.rs` with
+//! `pub struct Args` (clap::Args) and `pub fn run(args: Args) -> anyhow::Result<()>`, register
+//! the module in `cmd/mod.rs`, then add one variant to [`What`] and one arm to [`run`].
+
+/// Arguments of `cargo xtask bench`.
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    what: What,
+}
+
+/// Which benchmark to run.
+#[derive(clap::Subcommand)]
+enum What {
+    /// Time per image of each evaluation metric, against the Python references.
+    Eval(super::bench_eval::Args),
+    /// NeRF training steps/s and rays/s per preset and backend, against PyTorch on the CPU.
+    Nerf(super::bench_nerf::Args),
+}
+
+/// Runs the chosen benchmark.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.what {
+        What::Eval(a) => super::bench_eval::run(a),
+        What::Nerf(a) => super::bench_nerf::run(a),
+    }
+}
+
+/// A short description of this machine for benchmark reports: CPU model, logical cores, OS.
+pub fn machine_description() -> serde_json::Value {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
+        .unwrap_or_else(|| "unknown".into());
+    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0);
+    serde_json::json!({ "cpu": cpu, "logical_cores": cores, "os": std::env::consts::OS, "arch": std::env::consts::ARCH })
+}

@@ -1,0 +1,37 @@
+//! `cargo xtask devices`: which backends work on this machine.
+
+use burn::tensor::{ElementConversion, Tensor};
+use gb_core::BackendKind;
+
+/// Arguments of `cargo xtask devices`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Only check this backend.
+    #[arg(long)]
+    device: Option<BackendKind>,
+}
+
+/// Runs a small matrix product on each backend and prints the result and the time.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let kinds = match args.device {
+        Some(k) => vec![k],
+        None => BackendKind::ALL.to_vec(),
+    };
+    for kind in kinds {
+        let start = std::time::Instant::now();
+        let outcome = std::panic::catch_unwind(|| {
+            let device = kind.device();
+            let a = Tensor::<2>::ones([64, 64], &device);
+            let s: f32 = a.clone().matmul(a).sum().into_scalar().elem();
+            s
+        });
+        match outcome {
+            Ok(s) if s == 64.0 * 64.0 * 64.0 => {
+                println!("{kind:8} ok   ({:.1} ms)", start.elapsed().as_secs_f64() * 1e3)
+            }
+            Ok(s) => println!("{kind:8} WRONG result {s}"),
+            Err(_) => println!("{kind:8} unavailable (see the log above)"),
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,248 @@
+//! `cargo xtask distill-image`: the 2D score-distillation playground. Optimises the pixels
+//! inside a mask directly with SDS, CSD or BSD through a Stable Diffusion prior, writing a
+//! PNG every N steps, a grid at the end and a JSON-lines log (loss, gradient norm, t).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use burn::tensor::{Tensor, TensorData};
+use gb_core::{read_gray, read_rgb, write_rgb_png, BackendKind, RgbImage};
+use gb_diffusion::distill::sd_adapter::SdPrior;
+use gb_diffusion::distill::{
+    distill_view, DistillSettings, GuidanceMethod, PriorInputMode, PriorModels, PromptCache,
+    ScoreDistiller, TimestepConfig, ViewConditioning, Weighting,
+};
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Guidance method on the command line.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum Method {
+    /// Score Distillation Sampling (guidance scale = --w1).
+    Sds,
+    /// Classifier Score Distillation (w1, w2, w3; w3 defaults to w2 - w1).
+    Csd,
+    /// Balanced Score Distillation (w1, w2).
+    Bsd,
+}
+
+/// Arguments of `distill-image`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Diffusers-layout prior folder (unet/, vae/, text_encoder/, tokenizer/, scheduler/).
+    #[arg(long)]
+    pub prior: PathBuf,
+    /// The image (PNG/JPEG).
+    #[arg(long)]
+    pub image: PathBuf,
+    /// The mask (white or 1 = pixels to optimise), same size as the image.
+    #[arg(long)]
+    pub mask: PathBuf,
+    /// The prompt.
+    #[arg(long)]
+    pub prompt: String,
+    /// The negative prompt (CSD, BSD).
+    #[arg(long, default_value = "")]
+    pub negative_prompt: String,
+    /// Guidance method.
+    #[arg(long, value_enum, default_value = "bsd")]
+    pub method: Method,
+    /// w1 (SDS: the guidance scale, diffusers' convention).
+    #[arg(long, default_value_t = 7.5)]
+    pub w1: f32,
+    /// w2.
+    #[arg(long, default_value_t = 6.5)]
+    pub w2: f32,
+    /// w3 (CSD only; default w2 - w1).
+    #[arg(long)]
+    pub w3: Option<f32>,
+    /// Optimisation steps.
+    #[arg(long, default_value_t = 200)]
+    pub steps: usize,
+    /// Adam learning rate on the pixels (values in [0, 1]).
+    #[arg(long, default_value_t = 0.01)]
+    pub lr: f32,
+    /// Seed of the timesteps and noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Write a PNG every this many steps.
+    #[arg(long, default_value_t = 50)]
+    pub save_every: usize,
+    /// Prior input resolution (default: the prior's native one).
+    #[arg(long)]
+    pub resolution: Option<usize>,
+    /// Use w(t) = 1 instead of 1 - alpha_bar.
+    #[arg(long)]
+    pub constant_weight: bool,
+    /// Clamp the latent gradient to [-c, c].
+    #[arg(long)]
+    pub grad_clamp: Option<f32>,
+    /// Compute backend.
+    #[arg(long)]
+    pub device: Option<BackendKind>,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Runs the playground.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let kind = args.device.unwrap_or_default();
+    if args.steps == 0 || args.save_every == 0 {
+        bail!("--steps and --save-every must be > 0");
+    }
+    if !(args.lr.is_finite() && args.lr > 0.0) {
+        bail!("--lr must be a positive number, got {}", args.lr);
+    }
+    let image = read_rgb(&args.image, None).with_context(|| "reading --image".to_string())?;
+    let mask = read_mask(&args.mask, image.width, image.height)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+
+    let device = kind.device();
+    let prior = SdPrior::load(&args.prior, &device)
+        .with_context(|| format!("loading the prior from {}", args.prior.display()))?;
+    let resolution = args.resolution.unwrap_or(prior.resolution);
+    let guidance = match args.method {
+        Method::Sds => GuidanceMethod::Sds { guidance_scale: args.w1 },
+        Method::Csd => GuidanceMethod::Csd { w1: args.w1, w2: args.w2, w3: args.w3 },
+        Method::Bsd => GuidanceMethod::Bsd { w1: args.w1, w2: args.w2 },
+    };
+    let settings = DistillSettings {
+        guidance,
+        timesteps: TimestepConfig::default(),
+        weighting: if args.constant_weight { Weighting::Constant } else { Weighting::OneMinusAlphaBar },
+        grad_clamp: args.grad_clamp,
+    };
+    let mut distiller = ScoreDistiller::new(&settings, prior.alphas.clone(), args.seed)?;
+    let (w, h) = (image.width, image.height);
+    let gt = to_tensor(&image, &device);
+    let mask_t = Tensor::<4>::from_data(TensorData::new(mask.clone(), [1, 1, h, w]), &device);
+    let view = ViewConditioning::new(0, &prior.encoder, gt.clone(), mask_t, resolution)?;
+    let mut prompts_cache = PromptCache::new();
+    let prompts = prompts_cache.for_guidance(
+        &prior.text,
+        distiller.guidance(),
+        &args.prompt,
+        &args.negative_prompt,
+    )?;
+    let models = PriorModels { unet: &prior.unet, encoder: &prior.encoder };
+    tracing::info!(
+        method = distiller.guidance().name(),
+        resolution,
+        bbox = ?view.bbox,
+        "distilling {} ({w}x{h}) for {} steps",
+        args.image.display(),
+        args.steps
+    );
+
+    let mut pixels = gt.clone();
+    let mut adam = Adam::new(&pixels, args.lr);
+    let mut snapshots = vec![image.clone()];
+    let mut log = String::new();
+    let bar = ProgressBar::new(args.steps as u64);
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    for step in 1..=args.steps {
+        let render = pixels.clone().autodiff().require_grad();
+        let out = distill_view(
+            &mut distiller,
+            &models,
+            render.clone(),
+            &view,
+            0,
+            PriorInputMode::PasteOnGroundTruth,
+            &prompts,
+        )?;
+        let grads = out.loss.backward();
+        let grad = render
+            .grad(&grads)
+            .context("no gradient reached the pixels")?;
+        pixels = adam.step(pixels, grad).clamp(0.0, 1.0);
+        let d = &out.diagnostics;
+        bar.set_message(format!("t={} loss={:.3e} |g|={:.3e}", d.timestep, d.loss, d.grad_norm));
+        bar.inc(1);
+        tracing::debug!(step, t = d.timestep, loss = d.loss, grad_norm = d.grad_norm, "step");
+        log.push_str(&serde_json::to_string(&serde_json::json!({
+            "step": step, "t": d.timestep, "weight": d.weight, "loss": d.loss,
+            "grad_norm": d.grad_norm, "unet_calls": d.unet_calls, "unet_batch": d.unet_batch,
+        }))?);
+        log.push('\n');
+        if step % args.save_every == 0 || step == args.steps {
+            let snap = to_image(pixels.clone(), w, h)?;
+            write_rgb_png(&args.out.join(format!("step_{step:05}.png")), &snap)?;
+            snapshots.push(snap);
+        }
+    }
+    bar.finish();
+    gb_core::write_atomic(&args.out.join("log.jsonl"), log.as_bytes())?;
+    write_rgb_png(&args.out.join("grid.png"), &grid(&snapshots))?;
+    tracing::info!("wrote {} snapshots and grid.png to {}", snapshots.len() - 1, args.out.display());
+    Ok(())
+}
+
+/// Reads a mask as 0/1 values; accepts 0/255 and 0/1 encodings.
+fn read_mask(path: &Path, width: usize, height: usize) -> anyhow::Result<Vec<f32>> {
+    let (mw, mh, values) = read_gray(path).with_context(|| "reading --mask".to_string())?;
+    if (mw, mh) != (width, height) {
+        bail!("{}: mask is {mw}x{mh} but the image is {width}x{height}", path.display());
+    }
+    let max = values.iter().cloned().fold(0.0f32, f32::max);
+    let threshold = if max > 0.0 && max < 0.5 { max * 0.5 } else { 0.5 };
+    let mask: Vec<f32> = values.iter().map(|&v| if v >= threshold && v > 0.0 { 1.0 } else { 0.0 }).collect();
+    if !mask.iter().any(|&v| v > 0.0) {
+        bail!("{}: the mask is empty (no white pixel)", path.display());
+    }
+    Ok(mask)
+}
+
+fn to_tensor(img: &RgbImage, device: &burn::tensor::Device) -> Tensor<4> {
+    let hwc = Tensor::<3>::from_data(TensorData::new(img.data.clone(), [img.height, img.width, 3]), device);
+    hwc.permute([2, 0, 1]).unsqueeze()
+}
+
+fn to_image(t: Tensor<4>, width: usize, height: usize) -> anyhow::Result<RgbImage> {
+    let data = t
+        .squeeze_dim::<3>(0)
+        .permute([1, 2, 0])
+        .into_data()
+        .try_into_vec_as::<f32>()
+        .map_err(|e| anyhow::anyhow!("reading the image back: {e:?}"))?;
+    Ok(RgbImage { width, height, data })
+}
+
+/// The snapshots side by side (input first).
+fn grid(images: &[RgbImage]) -> RgbImage {
+    let (w, h) = (images[0].width, images[0].height);
+    let mut out = RgbImage::filled(w * images.len(), h, [1.0, 1.0, 1.0]);
+    for (i, img) in images.iter().enumerate() {
+        for y in 0..h {
+            for x in 0..w {
+                out.set(i * w + x, y, img.get(x, y));
+            }
+        }
+    }
+    out
+}
+
+/// Adam on a plain tensor.
+struct Adam {
+    m: Tensor<4>,
+    v: Tensor<4>,
+    lr: f32,
+    t: i32,
+}
+
+impl Adam {
+    fn new(like: &Tensor<4>, lr: f32) -> Self {
+        Self { m: like.zeros_like(), v: like.zeros_like(), lr, t: 0 }
+    }
+
+    fn step(&mut self, p: Tensor<4>, g: Tensor<4>) -> Tensor<4> {
+        let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-8f32);
+        self.t += 1;
+        self.m = self.m.clone().mul_scalar(b1) + g.clone().mul_scalar(1.0 - b1);
+        self.v = self.v.clone().mul_scalar(b2) + g.powi_scalar(2).mul_scalar(1.0 - b2);
+        let m_hat = self.m.clone().div_scalar(1.0 - b1.powi(self.t));
+        let v_hat = self.v.clone().div_scalar(1.0 - b2.powi(self.t));
+        p - m_hat.mul_scalar(self.lr) / (v_hat.sqrt().add_scalar(eps))
+    }
+}
