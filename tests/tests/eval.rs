@@ -11,11 +11,17 @@ fn fixtures() -> PathBuf {
 }
 
 fn expected() -> Value {
-    serde_json::from_str(&std::fs::read_to_string(fixtures().join("expected.json")).unwrap()).unwrap()
+    serde_json::from_str(&std::fs::read_to_string(fixtures().join("expected.json")).unwrap())
+        .unwrap()
 }
 
 fn case<'a>(doc: &'a Value, name: &str) -> &'a Value {
-    doc["cases"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap()
+    doc["cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["name"] == name)
+        .unwrap()
 }
 
 /// Copies the named cases into `root/{pred,gt,masks}` as 000.png, 001.png, ...
@@ -35,7 +41,11 @@ fn set_up(root: &Path, names: &[&str]) {
 }
 
 fn mean_of(doc: &Value, names: &[&str], key: &str) -> f64 {
-    names.iter().map(|n| case(doc, n)[key].as_f64().unwrap()).sum::<f64>() / names.len() as f64
+    names
+        .iter()
+        .map(|n| case(doc, n)[key].as_f64().unwrap())
+        .sum::<f64>()
+        / names.len() as f64
 }
 
 fn arg(p: &Path) -> &str {
@@ -80,18 +90,34 @@ fn eval_writes_the_paper_metrics_as_json_and_markdown() {
         ("ssim_bbox", 1e-5),
         ("ssim_mask", 1e-5),
     ] {
-        let got = report[key].as_f64().unwrap_or_else(|| panic!("{key} missing: {report}"));
+        let got = report[key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{key} missing: {report}"));
         let want = mean_of(&doc, &names, key);
         assert!((got - want).abs() < tol, "{key}: {got} vs {want}");
     }
     let lpips = report["lpips"].as_f64().expect("lpips");
-    assert!((lpips - mean_of(&doc, &names, "stlpips")).abs() < 1e-4, "{lpips}");
+    assert!(
+        (lpips - mean_of(&doc, &names, "stlpips")).abs() < 1e-4,
+        "{lpips}"
+    );
     assert!(report["lpips_bbox"].as_f64().is_some(), "{report}");
-    assert_eq!(report["nima"], Value::Null, "no NIMA weights exist here: never a number");
-    assert!(report["unavailable"]["nima"].as_str().is_some_and(|r| !r.is_empty()));
+    assert_eq!(
+        report["nima"],
+        Value::Null,
+        "no NIMA weights exist here: never a number"
+    );
+    assert!(report["unavailable"]["nima"]
+        .as_str()
+        .is_some_and(|r| !r.is_empty()));
     assert_eq!(report["per_image"].as_array().unwrap().len(), 3);
     let table = std::fs::read_to_string(&md).unwrap();
-    assert!(table.starts_with("| region | PSNR ↑ | SSIM ↑ | FID ↓ | NIMA ↑ | BRISQUE ↓ | D-FID ↓ | D-PSNR ↑"), "{table}");
+    assert!(
+        table.starts_with(
+            "| region | PSNR ↑ | SSIM ↑ | FID ↓ | NIMA ↑ | BRISQUE ↓ | D-FID ↓ | D-PSNR ↑"
+        ),
+        "{table}"
+    );
     assert!(String::from_utf8_lossy(&out.stdout).contains("| full image |"));
 }
 
@@ -101,7 +127,10 @@ fn identical_sets_report_infinite_psnr_as_the_string_inf() {
     let root = tmp.path();
     set_up(root, &["identical"]);
     let depth = fixtures().join("depth");
-    for (sub, file) in [("pd", "ramp_identical_pred.npy"), ("gd", "ramp_identical_gt.npy")] {
+    for (sub, file) in [
+        ("pd", "ramp_identical_pred.npy"),
+        ("gd", "ramp_identical_gt.npy"),
+    ] {
         std::fs::create_dir_all(root.join(sub)).unwrap();
         std::fs::copy(depth.join(file), root.join(sub).join("000.npy")).unwrap();
     }
@@ -121,7 +150,11 @@ fn identical_sets_report_infinite_psnr_as_the_string_inf() {
         "--json",
         arg(&json),
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let report: Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(report["psnr"], "inf");
     assert_eq!(report["d_psnr"], "inf");
@@ -133,8 +166,17 @@ fn mismatched_folders_are_a_clear_error_with_exit_code_2() {
     let root = tmp.path();
     set_up(root, &["statue_noise", "fern_blur"]);
     std::fs::remove_file(root.join("gt/001.png")).unwrap();
-    let out = xtask(&["eval", "--pred", arg(&root.join("pred")), "--gt", arg(&root.join("gt"))]);
+    let out = xtask(&[
+        "eval",
+        "--pred",
+        arg(&root.join("pred")),
+        "--gt",
+        arg(&root.join("gt")),
+    ]);
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("holds 2 files") && err.contains("holds 1"), "{err}");
+    assert!(
+        err.contains("holds 2 files") && err.contains("holds 1"),
+        "{err}"
+    );
 }

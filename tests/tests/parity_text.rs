@@ -30,7 +30,10 @@ fn read_safetensors(path: &Path) -> BTreeMap<String, (String, Vec<usize>, Vec<u8
             .map(|v| v.as_u64().unwrap() as usize)
             .collect();
         let off = info["data_offsets"].as_array().unwrap();
-        let (a, b) = (off[0].as_u64().unwrap() as usize, off[1].as_u64().unwrap() as usize);
+        let (a, b) = (
+            off[0].as_u64().unwrap() as usize,
+            off[1].as_u64().unwrap() as usize,
+        );
         out.insert(name.clone(), (dtype, shape, data[a..b].to_vec()));
     }
     out
@@ -44,7 +47,10 @@ fn f32s(raw: &[u8]) -> Vec<f32> {
 
 fn max_abs(a: &[f32], b: &[f32]) -> f32 {
     assert_eq!(a.len(), b.len());
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
 }
 
 #[test]
@@ -68,7 +74,11 @@ fn parity_tokenizer_writes_transformers_ids() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
     let tensors = read_safetensors(&out);
     let (dtype, shape, raw) = &tensors["input_ids"];
     assert_eq!(dtype, "I64");
@@ -109,7 +119,11 @@ fn text_encoder(lora: Option<&str>) -> Vec<f32> {
         args.extend(["--lora", l.to_str().unwrap()]);
     }
     let run = xtask(&args);
-    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
     let tensors = read_safetensors(&out);
     assert_eq!(tensors["last_hidden_state"].1, vec![2, 16, 32]);
     f32s(&tensors["last_hidden_state"].2)

@@ -21,14 +21,20 @@ enum Command {
     Devices(cmd::devices::Args),
     /// The paper's metrics (PSNR, SSIM, LPIPS, FID, NIMA, BRISQUE, D-FID, D-PSNR) on two folders.
     Eval(cmd::eval::Args),
+    /// Object removal: train a NeRF on the unmasked pixels and fill the mask (default job).
+    Inpaint(cmd::inpaint::Args),
+    /// 2D inpainting with a Stable Diffusion inpainting prior (checks that a prior loads).
+    InpaintImage(cmd::inpaint_image::Args),
+    /// The 2D score-distillation playground: SDS, CSD or BSD on the pixels inside a mask.
+    DistillImage(cmd::distill_image::Args),
+    /// Run one network component on fixed inputs and write its outputs (parity checks).
+    Parity(cmd::parity::Args),
     /// Benchmarks writing bench/results/*.json (`bench eval`, ...).
     Bench(cmd::bench::Args),
     /// Generate a procedural object-removal scene (stairs, fence) in the SPIn-NeRF layout.
     Scene(cmd::scene::Args),
     /// Summarise a scene folder: views per split, resolution, masks, near/far, warnings.
     SceneInfo(cmd::scene_info::Args),
-    /// Remove the masked object from a scene (`--prior none`: NeRF on unmasked pixels only).
-    Inpaint(cmd::inpaint::Args),
 }
 
 fn main() {
@@ -43,10 +49,13 @@ fn main() {
     let result = match cli.command {
         Command::Devices(a) => cmd::devices::run(a),
         Command::Eval(a) => cmd::eval::run(a),
+        Command::Inpaint(a) => cmd::inpaint::run(a),
+        Command::InpaintImage(a) => cmd::inpaint_image::run(a),
+        Command::DistillImage(a) => cmd::distill_image::run(a),
+        Command::Parity(a) => cmd::parity::run(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::Scene(a) => cmd::scene::run(a),
         Command::SceneInfo(a) => cmd::scene_info::run(a),
-        Command::Inpaint(a) => cmd::inpaint::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

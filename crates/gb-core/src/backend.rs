@@ -107,10 +107,9 @@ mod tests {
         for kind in test_backends() {
             let device = kind.device();
             let t = burn::tensor::Tensor::<1>::from_floats([1.0, 2.0, 3.5], &device);
-            let s: f32 = t.sum().into_scalar().elem();
+            let s: f32 = t.sum().into_scalar::<f32>();
             assert_eq!(s, 6.5, "backend {kind}");
         }
     }
 
-    use burn::tensor::ElementConversion;
 }

@@ -16,12 +16,13 @@ use tokenizers::pre_tokenizers::split::{Split, SplitPattern};
 use tokenizers::processors::roberta::RobertaProcessing;
 use tokenizers::{
     AddedToken, NormalizerWrapper, PaddingDirection, PaddingParams, PaddingStrategy,
-    PreTokenizerWrapper, SplitDelimiterBehavior, Tokenizer, TruncationDirection,
-    TruncationParams, TruncationStrategy,
+    PreTokenizerWrapper, SplitDelimiterBehavior, Tokenizer, TruncationDirection, TruncationParams,
+    TruncationStrategy,
 };
 
 /// CLIP's pre-tokenising regex (with the special tokens kept whole), as in transformers.
-const CLIP_PATTERN: &str = r"<\|startoftext\|>|<\|endoftext\|>|'s|'t|'re|'ve|'m|'ll|'d|[\p{L}]+|[\p{N}]|[^\s\p{L}\p{N}]+";
+const CLIP_PATTERN: &str =
+    r"<\|startoftext\|>|<\|endoftext\|>|'s|'t|'re|'ve|'m|'ll|'d|[\p{L}]+|[\p{N}]|[^\s\p{L}\p{N}]+";
 
 /// Error building or running the tokenizer.
 #[derive(Debug, thiserror::Error)]
@@ -239,12 +240,7 @@ fn build_pipeline(model: BPE, special: &ClipSpecialTokens) -> Result<Tokenizer, 
         .add_prefix_space(false);
     tokenizer.with_post_processor(Some(post));
     let mut specials: Vec<AddedToken> = Vec::new();
-    for text in [
-        &special.bos.0,
-        &special.eos.0,
-        &special.pad.0,
-        &special.unk,
-    ] {
+    for text in [&special.bos.0, &special.eos.0, &special.pad.0, &special.unk] {
         if !specials.iter().any(|t| &t.content == text) {
             specials.push(AddedToken::from(text.clone(), true));
         }

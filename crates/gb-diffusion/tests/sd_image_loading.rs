@@ -157,7 +157,7 @@ fn vae_encoder_gradient_matches_finite_differences() {
         .unwrap();
     let f = |v: &[f32]| -> f64 {
         let x = Tensor::<4>::from_data(TensorData::new(v.to_vec(), [1, 3, 16, 16]), &plain);
-        objective(&vae, x, &plain).into_scalar().elem::<f32>() as f64
+        objective(&vae, x, &plain).into_scalar::<f32>() as f64
     };
     let h = 1e-2f32;
     for idx in [0usize, 77, 300, 511, 767] {

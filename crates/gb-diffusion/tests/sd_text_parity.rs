@@ -36,7 +36,10 @@ fn text_encoder_matches_transformers_on_every_backend() {
             ("clip_fp16", WeightVariant::Fp16, "last_hidden_state_fp16"),
         ] {
             let model = load(folder, variant, &device);
-            let err = max_abs_err(run(&model, &device), &read_f32("text_io.safetensors", expected));
+            let err = max_abs_err(
+                run(&model, &device),
+                &read_f32("text_io.safetensors", expected),
+            );
             println!("{kind} {folder}: max abs err {err:.3e}");
             assert!(err < TOL, "{kind} {folder}: max abs err {err}");
         }
@@ -94,10 +97,20 @@ fn lora_changes_the_output_and_a_second_lora_is_refused() {
     assert!(diff > 0.05, "the LoRA fixture must matter: {diff}");
     let file = LoraFile::read(&fixtures().join("lora/pytorch_lora_weights.safetensors")).unwrap();
     assert!(file.entries.iter().all(|e| (e.scale - 2.0).abs() < 1e-12));
-    let (model, _) = apply_lora(base, &file, LoraComponent::TextEncoder, &keymap::TEXT_ENCODER)
-        .unwrap();
-    let err = apply_lora(model, &file, LoraComponent::TextEncoder, &keymap::TEXT_ENCODER)
-        .unwrap_err();
+    let (model, _) = apply_lora(
+        base,
+        &file,
+        LoraComponent::TextEncoder,
+        &keymap::TEXT_ENCODER,
+    )
+    .unwrap();
+    let err = apply_lora(
+        model,
+        &file,
+        LoraComponent::TextEncoder,
+        &keymap::TEXT_ENCODER,
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("already has a LoRA"), "{err}");
 }
 
@@ -123,15 +136,22 @@ fn written_peft_file_round_trips() {
     )
     .unwrap();
     if let Some(dir) = std::env::var_os("GB_LORA_EXPORT_DIR") {
-        std::fs::copy(&out, std::path::Path::new(&dir).join("rust_text_lora.safetensors"))
-            .unwrap();
+        std::fs::copy(
+            &out,
+            std::path::Path::new(&dir).join("rust_text_lora.safetensors"),
+        )
+        .unwrap();
     }
     let reread = LoraFile::read(&out).unwrap();
     let original =
         LoraFile::read(&fixtures().join("lora/pytorch_lora_weights.safetensors")).unwrap();
     assert_eq!(reread.entries.len(), original.entries.len());
     for e in &reread.entries {
-        assert!(e.module.starts_with("text_model.encoder.layers."), "{}", e.module);
+        assert!(
+            e.module.starts_with("text_model.encoder.layers."),
+            "{}",
+            e.module
+        );
         assert!((e.scale - 2.0).abs() < 1e-12);
         let twin = original
             .entries

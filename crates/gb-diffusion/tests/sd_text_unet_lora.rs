@@ -80,13 +80,19 @@ fn written_unet_lora_reloads_to_the_same_output() {
     )
     .unwrap();
     if let Some(dir) = std::env::var_os("GB_LORA_EXPORT_DIR") {
-        std::fs::copy(&out, std::path::Path::new(&dir).join("rust_unet_lora.safetensors"))
-            .unwrap();
+        std::fs::copy(
+            &out,
+            std::path::Path::new(&dir).join("rust_unet_lora.safetensors"),
+        )
+        .unwrap();
     }
     let reread = LoraFile::read(&out).unwrap();
     for e in &reread.entries {
         let twin = file.entries.iter().find(|o| o.module == e.module).unwrap();
-        assert_eq!((&twin.down_shape, &twin.up_shape), (&e.down_shape, &e.up_shape));
+        assert_eq!(
+            (&twin.down_shape, &twin.up_shape),
+            (&e.down_shape, &e.up_shape)
+        );
         assert_eq!(twin.scale, e.scale);
     }
     let (fresh, _) = load_unet(&image_fixtures().join("pipeline"), &device).unwrap();

@@ -60,18 +60,32 @@ pub enum DisparityReadError {
 
 /// Reads a depth or disparity map (`.npy` or an image file) and returns disparity.
 pub fn read_disparity(path: &Path, kind: DepthKind) -> Result<ScalarMap, DisparityReadError> {
-    let err = |reason: String| DisparityReadError::Read { path: path.to_path_buf(), reason };
-    let is_npy = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    let err = |reason: String| DisparityReadError::Read {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let is_npy = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
     let mut map = if is_npy {
         let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
         read_npy(&bytes).map_err(err)?
     } else {
         let (width, height, data) = gb_core::read_gray(path).map_err(|e| err(e.to_string()))?;
-        ScalarMap { width, height, data }
+        ScalarMap {
+            width,
+            height,
+            data,
+        }
     };
     if kind == DepthKind::Depth {
         for v in &mut map.data {
-            *v = if v.is_finite() && *v > 0.0 { 1.0 / *v } else { 0.0 };
+            *v = if v.is_finite() && *v > 0.0 {
+                1.0 / *v
+            } else {
+                0.0
+            };
         }
     }
     Ok(map)
@@ -83,7 +97,11 @@ fn read_npy(bytes: &[u8]) -> Result<ScalarMap, String> {
     let fortran = matches!(npy.order(), npyz::Order::Fortran);
     let (height, width) = match shape.as_slice() {
         [h, w] | [h, w, 1] => (*h, *w),
-        other => return Err(format!("expected shape [h, w] or [h, w, 1], found {other:?}")),
+        other => {
+            return Err(format!(
+                "expected shape [h, w] or [h, w, 1], found {other:?}"
+            ))
+        }
     };
     let dtype = match npy.dtype() {
         npyz::DType::Plain(ts) => ts.to_string(),
@@ -91,8 +109,17 @@ fn read_npy(bytes: &[u8]) -> Result<ScalarMap, String> {
     };
     let values: Vec<f32> = match dtype.as_str() {
         "<f4" | ">f4" => npy.into_vec::<f32>().map_err(|e| e.to_string())?,
-        "<f8" | ">f8" => npy.into_vec::<f64>().map_err(|e| e.to_string())?.into_iter().map(|v| v as f32).collect(),
-        other => return Err(format!("expected float32 or float64 values, found dtype {other}")),
+        "<f8" | ">f8" => npy
+            .into_vec::<f64>()
+            .map_err(|e| e.to_string())?
+            .into_iter()
+            .map(|v| v as f32)
+            .collect(),
+        other => {
+            return Err(format!(
+                "expected float32 or float64 values, found dtype {other}"
+            ))
+        }
     };
     let data = if fortran {
         let mut c = vec![0.0; width * height];
@@ -105,7 +132,11 @@ fn read_npy(bytes: &[u8]) -> Result<ScalarMap, String> {
     } else {
         values
     };
-    Ok(ScalarMap { width, height, data })
+    Ok(ScalarMap {
+        width,
+        height,
+        data,
+    })
 }
 
 /// The reference's 8-bit, 3-channel rendering of a disparity map (see the module docs).
@@ -121,7 +152,13 @@ pub fn disparity_to_rgb8(disp: &ScalarMap) -> Result<RgbImage, MetricError> {
             channels: 1,
         });
     }
-    let clean = |v: f32| if v.is_finite() && v > 0.0 { f64::from(v) } else { 0.0 };
+    let clean = |v: f32| {
+        if v.is_finite() && v > 0.0 {
+            f64::from(v)
+        } else {
+            0.0
+        }
+    };
     let max = disp.data.iter().map(|&v| clean(v)).fold(0.0, f64::max);
     if max <= 0.0 {
         return Err(MetricError::InvalidInput {
@@ -135,7 +172,11 @@ pub fn disparity_to_rgb8(disp: &ScalarMap) -> Result<RgbImage, MetricError> {
         let f = f32::from(q) / 255.0;
         data.extend_from_slice(&[f, f, f]);
     }
-    Ok(RgbImage { width: disp.width, height: disp.height, data })
+    Ok(RgbImage {
+        width: disp.width,
+        height: disp.height,
+        data,
+    })
 }
 
 /// D-PSNR: PSNR between the 8-bit renderings of two disparity maps over `region`.
@@ -149,9 +190,18 @@ mod tests {
 
     #[test]
     fn normalises_by_the_maximum_and_truncates() {
-        let m = ScalarMap { width: 4, height: 1, data: vec![2.0, 1.0, 0.999, f32::NAN] };
+        let m = ScalarMap {
+            width: 4,
+            height: 1,
+            data: vec![2.0, 1.0, 0.999, f32::NAN],
+        };
         let img = disparity_to_rgb8(&m).unwrap();
-        let u8s: Vec<u8> = img.data.iter().step_by(3).map(|v| (v * 255.0).round() as u8).collect();
+        let u8s: Vec<u8> = img
+            .data
+            .iter()
+            .step_by(3)
+            .map(|v| (v * 255.0).round() as u8)
+            .collect();
         // 255 * 0.5 = 127.5 -> 127 (truncated), 255 * 0.4995 = 127.37 -> 127.
         assert_eq!(u8s, vec![255, 127, 127, 0]);
         assert_eq!(img.data[0..3], [1.0, 1.0, 1.0]);
@@ -159,14 +209,28 @@ mod tests {
 
     #[test]
     fn all_zero_disparity_is_an_error() {
-        let m = ScalarMap { width: 2, height: 1, data: vec![0.0, -1.0] };
-        assert!(matches!(disparity_to_rgb8(&m), Err(MetricError::InvalidInput { .. })));
+        let m = ScalarMap {
+            width: 2,
+            height: 1,
+            data: vec![0.0, -1.0],
+        };
+        assert!(matches!(
+            disparity_to_rgb8(&m),
+            Err(MetricError::InvalidInput { .. })
+        ));
     }
 
     #[test]
     fn scaled_disparity_gives_infinite_d_psnr() {
-        let a = ScalarMap { width: 3, height: 2, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] };
-        let b = ScalarMap { data: a.data.iter().map(|v| v * 4.0).collect(), ..a.clone() };
+        let a = ScalarMap {
+            width: 3,
+            height: 2,
+            data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        };
+        let b = ScalarMap {
+            data: a.data.iter().map(|v| v * 4.0).collect(),
+            ..a.clone()
+        };
         assert_eq!(d_psnr(&a, &b, &Region::Full).unwrap(), f64::INFINITY);
     }
 }

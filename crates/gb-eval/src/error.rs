@@ -49,7 +49,9 @@ pub enum MetricError {
     #[error("the mask selects no pixel: a masked metric is undefined")]
     EmptyMask,
     /// A bounding box is empty or reaches outside the image.
-    #[error("bounding box x {x0}..{x1}, y {y0}..{y1} is empty or outside the {width}x{height} image")]
+    #[error(
+        "bounding box x {x0}..{x1}, y {y0}..{y1} is empty or outside the {width}x{height} image"
+    )]
     BadBBox {
         /// Left column (inclusive).
         x0: usize,

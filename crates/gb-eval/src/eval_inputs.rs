@@ -109,7 +109,13 @@ impl EvalInputs {
     ) -> Result<Self, InputError> {
         let pred = list_files(pred_dir, "image", &IMAGE_EXTENSIONS)?;
         let gt = list_files(gt_dir, "image", &IMAGE_EXTENSIONS)?;
-        check_count("prediction/ground truth", pred_dir, pred.len(), gt_dir, gt.len())?;
+        check_count(
+            "prediction/ground truth",
+            pred_dir,
+            pred.len(),
+            gt_dir,
+            gt.len(),
+        )?;
         for (p, g) in pred.iter().zip(&gt) {
             check_same_size(p, g)?;
         }
@@ -128,7 +134,13 @@ impl EvalInputs {
             Some((pd, gd)) => {
                 let pdep = list_files(pd, "depth", &DEPTH_EXTENSIONS)?;
                 let gdep = list_files(gd, "depth", &DEPTH_EXTENSIONS)?;
-                check_count("predicted/ground-truth depth", pd, pdep.len(), gd, gdep.len())?;
+                check_count(
+                    "predicted/ground-truth depth",
+                    pd,
+                    pdep.len(),
+                    gd,
+                    gdep.len(),
+                )?;
                 check_count("prediction/depth", pred_dir, pred.len(), pd, pdep.len())?;
                 Some((pdep, gdep))
             }
@@ -136,7 +148,11 @@ impl EvalInputs {
         };
         let names = pred
             .iter()
-            .map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default())
+            .map(|p| {
+                p.file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default()
+            })
             .collect();
         Ok(Self {
             pred_dir: pred_dir.to_path_buf(),
@@ -166,38 +182,74 @@ impl EvalInputs {
         let p = read_rgb(&self.pred[i], None)?;
         let g = read_rgb(&self.gt[i], None)?;
         if (p.width, p.height) != (g.width, g.height) {
-            return Err(size_mismatch(&self.pred[i], (p.width, p.height), &self.gt[i], (g.width, g.height)));
+            return Err(size_mismatch(
+                &self.pred[i],
+                (p.width, p.height),
+                &self.gt[i],
+                (g.width, g.height),
+            ));
         }
         Ok((p, g))
     }
 
     /// Reads mask `i` (non-zero = inside), if a mask folder was given.
     pub fn load_mask(&self, i: usize) -> Result<Option<Vec<bool>>, InputError> {
-        let Some(masks) = &self.masks else { return Ok(None) };
+        let Some(masks) = &self.masks else {
+            return Ok(None);
+        };
         let (_, _, values) = read_gray(&masks[i])?;
         Ok(Some(values.into_iter().map(|v| v > 0.0).collect()))
     }
 
     /// Reads depth pair `i` as disparity `(prediction, ground truth)`, if depth folders were
     /// given; the two maps must have the same size.
-    pub fn load_disparity_pair(&self, i: usize) -> Result<Option<(ScalarMap, ScalarMap)>, InputError> {
-        let Some((pd, gd)) = &self.depth else { return Ok(None) };
+    pub fn load_disparity_pair(
+        &self,
+        i: usize,
+    ) -> Result<Option<(ScalarMap, ScalarMap)>, InputError> {
+        let Some((pd, gd)) = &self.depth else {
+            return Ok(None);
+        };
         let p = read_disparity(&pd[i], self.depth_kind)?;
         let g = read_disparity(&gd[i], self.depth_kind)?;
         if (p.width, p.height) != (g.width, g.height) {
-            return Err(size_mismatch(&pd[i], (p.width, p.height), &gd[i], (g.width, g.height)));
+            return Err(size_mismatch(
+                &pd[i],
+                (p.width, p.height),
+                &gd[i],
+                (g.width, g.height),
+            ));
         }
         Ok(Some((p, g)))
     }
 }
 
-fn size_mismatch(a: &Path, (aw, ah): (usize, usize), b: &Path, (bw, bh): (usize, usize)) -> InputError {
-    InputError::SizeMismatch { a: a.to_path_buf(), aw, ah, b: b.to_path_buf(), bw, bh }
+fn size_mismatch(
+    a: &Path,
+    (aw, ah): (usize, usize),
+    b: &Path,
+    (bw, bh): (usize, usize),
+) -> InputError {
+    InputError::SizeMismatch {
+        a: a.to_path_buf(),
+        aw,
+        ah,
+        b: b.to_path_buf(),
+        bw,
+        bh,
+    }
 }
 
 /// The folder's files with one of `extensions` (case-insensitive), sorted by name.
-fn list_files(dir: &Path, what: &'static str, extensions: &[&str]) -> Result<Vec<PathBuf>, InputError> {
-    let list_err = |e: std::io::Error| InputError::ListDir { path: dir.to_path_buf(), reason: e.to_string() };
+fn list_files(
+    dir: &Path,
+    what: &'static str,
+    extensions: &[&str],
+) -> Result<Vec<PathBuf>, InputError> {
+    let list_err = |e: std::io::Error| InputError::ListDir {
+        path: dir.to_path_buf(),
+        reason: e.to_string(),
+    };
     let mut files = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(list_err)? {
         let path = entry.map_err(list_err)?.path();
@@ -211,14 +263,30 @@ fn list_files(dir: &Path, what: &'static str, extensions: &[&str]) -> Result<Vec
     }
     files.sort();
     if files.is_empty() {
-        return Err(InputError::Empty { path: dir.to_path_buf(), what, extensions: extensions.join(", ") });
+        return Err(InputError::Empty {
+            path: dir.to_path_buf(),
+            what,
+            extensions: extensions.join(", "),
+        });
     }
     Ok(files)
 }
 
-fn check_count(what: &'static str, a_dir: &Path, a: usize, b_dir: &Path, b: usize) -> Result<(), InputError> {
+fn check_count(
+    what: &'static str,
+    a_dir: &Path,
+    a: usize,
+    b_dir: &Path,
+    b: usize,
+) -> Result<(), InputError> {
     if a != b {
-        return Err(InputError::CountMismatch { what, a_dir: a_dir.to_path_buf(), a, b_dir: b_dir.to_path_buf(), b });
+        return Err(InputError::CountMismatch {
+            what,
+            a_dir: a_dir.to_path_buf(),
+            a,
+            b_dir: b_dir.to_path_buf(),
+            b,
+        });
     }
     Ok(())
 }
@@ -227,7 +295,12 @@ fn check_same_size(a: &Path, b: &Path) -> Result<(), InputError> {
     let dims = |p: &Path| {
         image::image_dimensions(p)
             .map(|(w, h)| (w as usize, h as usize))
-            .map_err(|source| InputError::Image(ImageIoError::Read { path: p.to_path_buf(), source }))
+            .map_err(|source| {
+                InputError::Image(ImageIoError::Read {
+                    path: p.to_path_buf(),
+                    source,
+                })
+            })
     };
     let (da, db) = (dims(a)?, dims(b)?);
     if da != db {
@@ -256,10 +329,16 @@ mod tests {
         write(&g, "x.png", 4, 3);
         std::fs::write(g.join("notes.txt"), "ignored").unwrap();
         let err = EvalInputs::from_dirs(&p, &g, None, None, DepthKind::Disparity).unwrap_err();
-        assert!(matches!(err, InputError::CountMismatch { a: 2, b: 1, .. }), "{err}");
+        assert!(
+            matches!(err, InputError::CountMismatch { a: 2, b: 1, .. }),
+            "{err}"
+        );
         write(&g, "y.png", 5, 3);
         let err = EvalInputs::from_dirs(&p, &g, None, None, DepthKind::Disparity).unwrap_err();
-        assert!(err.to_string().contains("y.png") && err.to_string().contains("5x3"), "{err}");
+        assert!(
+            err.to_string().contains("y.png") && err.to_string().contains("5x3"),
+            "{err}"
+        );
         write(&g, "y.png", 4, 3);
         let inputs = EvalInputs::from_dirs(&p, &g, None, None, DepthKind::Disparity).unwrap();
         assert_eq!(inputs.names, vec!["a.png", "b.png"]);

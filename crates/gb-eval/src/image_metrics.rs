@@ -103,12 +103,20 @@ pub fn mse(pred: &RgbImage, gt: &RgbImage, region: &Region) -> Result<f64, Metri
         Region::Full => ((0..w * pred.height).map(sq).sum::<f64>(), w * pred.height),
         Region::BBox { x0, y0, x1, y1 } => {
             check_bbox(*x0, *y0, *x1, *y1, w, pred.height)?;
-            let sum = (*y0..*y1).flat_map(|y| (*x0..*x1).map(move |x| y * w + x)).map(sq).sum();
+            let sum = (*y0..*y1)
+                .flat_map(|y| (*x0..*x1).map(move |x| y * w + x))
+                .map(sq)
+                .sum();
             (sum, (x1 - x0) * (y1 - y0))
         }
         Region::Mask(mask) => {
             let n = check_mask(mask, w, pred.height)?;
-            let sum = mask.iter().enumerate().filter(|(_, &m)| m).map(|(i, _)| sq(i)).sum();
+            let sum = mask
+                .iter()
+                .enumerate()
+                .filter(|(_, &m)| m)
+                .map(|(i, _)| sq(i))
+                .sum();
             (sum, n)
         }
     };
@@ -156,7 +164,12 @@ pub fn ssim_with(
             let mut total = 0.0;
             for (x, y) in &planes {
                 let map = ssim_map(x, y, w, h);
-                let s: f64 = map.iter().zip(mask).filter(|(_, &m)| m).map(|(v, _)| v).sum();
+                let s: f64 = map
+                    .iter()
+                    .zip(mask)
+                    .filter(|(_, &m)| m)
+                    .map(|(v, _)| v)
+                    .sum();
                 total += s / n as f64;
             }
             Ok(total / planes.len() as f64)
@@ -199,7 +212,11 @@ fn planes(
         for y in y0..y1 {
             for x in x0..x1 {
                 let i = (y * img.width + x) * 3;
-                out.push((0..3).map(|c| weights[c] * f64::from(img.data[i + c])).sum());
+                out.push(
+                    (0..3)
+                        .map(|c| weights[c] * f64::from(img.data[i + c]))
+                        .sum(),
+                );
             }
         }
         out
@@ -334,7 +351,14 @@ pub(crate) fn check_bbox(
     height: usize,
 ) -> Result<(), MetricError> {
     if x0 >= x1 || y0 >= y1 || x1 > width || y1 > height {
-        return Err(MetricError::BadBBox { x0, y0, x1, y1, width, height });
+        return Err(MetricError::BadBBox {
+            x0,
+            y0,
+            x1,
+            y1,
+            width,
+            height,
+        });
     }
     Ok(())
 }
@@ -342,7 +366,12 @@ pub(crate) fn check_bbox(
 /// Checks a mask's length and returns its number of selected pixels (never zero).
 pub(crate) fn check_mask(mask: &[bool], width: usize, height: usize) -> Result<usize, MetricError> {
     if mask.len() != width * height {
-        return Err(MetricError::MaskSize { got: mask.len(), expected: width * height, width, height });
+        return Err(MetricError::MaskSize {
+            got: mask.len(),
+            expected: width * height,
+            width,
+            height,
+        });
     }
     match mask.iter().filter(|&&m| m).count() {
         0 => Err(MetricError::EmptyMask),
@@ -352,7 +381,12 @@ pub(crate) fn check_mask(mask: &[bool], width: usize, height: usize) -> Result<u
 
 fn check_ssim_size(width: usize, height: usize) -> Result<(), MetricError> {
     if width < SSIM_WIN || height < SSIM_WIN {
-        return Err(MetricError::TooSmall { metric: "SSIM", min: SSIM_WIN, width, height });
+        return Err(MetricError::TooSmall {
+            metric: "SSIM",
+            min: SSIM_WIN,
+            width,
+            height,
+        });
     }
     Ok(())
 }
@@ -382,7 +416,9 @@ mod tests {
     fn psnr_of_a_uniform_offset_is_closed_form() {
         let a = RgbImage::filled(8, 6, [0.5, 0.5, 0.5]);
         let b = RgbImage::filled(8, 6, [0.6, 0.4, 0.6]);
-        let expected = 10.0 * (1.0 / (f64::from(0.6f32) - f64::from(0.5f32)).powi(2)).log10();
+        let sq = |a: f32, b: f32| (f64::from(a) - f64::from(b)).powi(2);
+        let mse = (2.0 * sq(0.6, 0.5) + sq(0.4, 0.5)) / 3.0;
+        let expected = 10.0 * (1.0 / mse).log10();
         let got = psnr(&a, &b, &Region::Full).unwrap();
         assert!((got - expected).abs() < 1e-9, "{got} vs {expected}");
         assert_eq!(psnr(&a, &a, &Region::Full).unwrap(), f64::INFINITY);
@@ -414,7 +450,15 @@ mod tests {
         let mut mask = vec![false; 5 * 4];
         mask[5 + 1] = true;
         mask[2 * 5 + 3] = true;
-        assert_eq!(Region::bbox_of_mask(&mask, 5), Some(Region::BBox { x0: 1, y0: 1, x1: 4, y1: 3 }));
+        assert_eq!(
+            Region::bbox_of_mask(&mask, 5),
+            Some(Region::BBox {
+                x0: 1,
+                y0: 1,
+                x1: 4,
+                y1: 3
+            })
+        );
         assert_eq!(Region::bbox_of_mask(&[false; 20], 5), None);
     }
 
@@ -422,11 +466,28 @@ mod tests {
     fn bad_inputs_are_errors() {
         let a = ramp(12, 12, 0.0);
         let b = ramp(13, 12, 0.0);
-        assert!(matches!(psnr(&a, &b, &Region::Full), Err(MetricError::SizeMismatch { .. })));
+        assert!(matches!(
+            psnr(&a, &b, &Region::Full),
+            Err(MetricError::SizeMismatch { .. })
+        ));
         let small = ramp(10, 30, 0.0);
-        assert!(matches!(ssim(&small, &small, &Region::Full), Err(MetricError::TooSmall { .. })));
-        let bbox = Region::BBox { x0: 2, y0: 0, x1: 20, y1: 5 };
-        assert!(matches!(psnr(&a, &a, &bbox), Err(MetricError::BadBBox { .. })));
-        assert!(matches!(ssim(&a, &a, &Region::Mask(vec![true; 3])), Err(MetricError::MaskSize { .. })));
+        assert!(matches!(
+            ssim(&small, &small, &Region::Full),
+            Err(MetricError::TooSmall { .. })
+        ));
+        let bbox = Region::BBox {
+            x0: 2,
+            y0: 0,
+            x1: 20,
+            y1: 5,
+        };
+        assert!(matches!(
+            psnr(&a, &a, &bbox),
+            Err(MetricError::BadBBox { .. })
+        ));
+        assert!(matches!(
+            ssim(&a, &a, &Region::Mask(vec![true; 3])),
+            Err(MetricError::MaskSize { .. })
+        ));
     }
 }

@@ -132,14 +132,29 @@ impl LpipsNet {
             .iter()
             .map(|&c| Param::from_tensor(Tensor::zeros([1, c, 1, 1], device)))
             .collect();
-        let constant = |v: [f32; 3]| Param::from_tensor(Tensor::<4>::from_data(TensorData::new(v.to_vec(), [1, 3, 1, 1]), device));
-        Self { shift: constant(SHIFT), scale: constant(SCALE), convs, lins, backbone }
+        let constant = |v: [f32; 3]| {
+            Param::from_tensor(Tensor::<4>::from_data(
+                TensorData::new(v.to_vec(), [1, 3, 1, 1]),
+                device,
+            ))
+        };
+        Self {
+            shift: constant(SHIFT),
+            scale: constant(SCALE),
+            convs,
+            lins,
+            backbone,
+        }
     }
 
     /// Loads the package's state dict from a safetensors file (see the module docs). Every
     /// backbone and head tensor must be present; the scaling constants may be absent.
     pub fn load(path: &Path, backbone: Backbone, device: &Device) -> Result<Self, MetricError> {
-        let err = |reason: String| MetricError::Weights { path: path.to_path_buf(), what: backbone.name(), reason };
+        let err = |reason: String| MetricError::Weights {
+            path: path.to_path_buf(),
+            what: backbone.name(),
+            reason,
+        };
         if !path.is_file() {
             return Err(err("file not found".into()));
         }
@@ -148,18 +163,29 @@ impl LpipsNet {
             .with_key_remapping(r"^scaling_layer\.shift$", "shift")
             .with_key_remapping(r"^scaling_layer\.scale$", "scale");
         for (i, (prefix, ..)) in backbone.convs().iter().enumerate() {
-            store = store.with_key_remapping(format!("^{}", regex_escape(prefix)), format!("convs.{i}."));
+            store = store
+                .with_key_remapping(format!("^{}", regex_escape(prefix)), format!("convs.{i}."));
         }
         store = store.with_key_remapping(r"^lin([0-4])\.model\.1\.weight$", "lins.$1");
         let mut model = Self::empty(backbone, device);
-        let result = model.load_from(&mut store).map_err(|e| err(e.to_string()))?;
-        let missing: Vec<&String> =
-            result.missing.iter().map(|(p, _)| p).filter(|p| *p != "shift" && *p != "scale").collect();
+        let result = model
+            .load_from(&mut store)
+            .map_err(|e| err(e.to_string()))?;
+        let missing: Vec<&String> = result
+            .missing
+            .iter()
+            .map(|(p, _)| p)
+            .filter(|p| *p != "shift" && *p != "scale")
+            .collect();
         if !missing.is_empty() {
             return Err(err(format!("missing tensors {missing:?}")));
         }
         // `lins.K.*` duplicates `linK.*` in the package's state dict: tolerated.
-        let unused: Vec<&String> = result.unused.iter().filter(|k| !k.starts_with("lins.")).collect();
+        let unused: Vec<&String> = result
+            .unused
+            .iter()
+            .filter(|k| !k.starts_with("lins."))
+            .collect();
         if !unused.is_empty() {
             return Err(err(format!("unexpected tensors {unused:?}")));
         }
@@ -174,7 +200,8 @@ impl LpipsNet {
         let c = |i: usize, h: Tensor<4>| relu(self.convs[i].forward(h));
         match self.backbone {
             Backbone::Alex => {
-                let pool = |h: Tensor<4>| max_pool2d(h, MaxPoolOptions::new([3, 3]).with_stride([2, 2]));
+                let pool =
+                    |h: Tensor<4>| max_pool2d(h, MaxPoolOptions::new([3, 3]).with_stride([2, 2]));
                 let r1 = c(0, x);
                 let r2 = c(1, pool(r1.clone()));
                 let r3 = c(2, pool(r2.clone()));
@@ -206,7 +233,11 @@ impl LpipsNet {
 /// LPIPS from the features of a batch `[pred; gt]` (first `n` items predictions): unit-normalise
 /// each map over channels (`x / (||x|| + 1e-10)`), weight the squared difference by the head,
 /// average over space and sum over layers.
-pub(crate) fn distance_from_features(feats: Vec<Tensor<4>>, lins: &[Tensor<4>], n: usize) -> Tensor<1> {
+pub(crate) fn distance_from_features(
+    feats: Vec<Tensor<4>>,
+    lins: &[Tensor<4>],
+    n: usize,
+) -> Tensor<1> {
     let mut total: Option<Tensor<1>> = None;
     for (f, lin) in feats.into_iter().zip(lins) {
         let norm = f.clone().powi_scalar(2).sum_dim(1).sqrt() + 1e-10;
@@ -244,7 +275,10 @@ pub struct Lpips {
 impl Lpips {
     /// Loads the `backbone` network from `path` onto `device`.
     pub fn load(path: &Path, backbone: Backbone, device: &Device) -> Result<Self, MetricError> {
-        Ok(Self { net: LpipsNet::load(path, backbone, device)?, device: device.clone() })
+        Ok(Self {
+            net: LpipsNet::load(path, backbone, device)?,
+            device: device.clone(),
+        })
     }
 
     /// LPIPS distance between `pred` and `gt` (lower is better; 0 for identical images).
@@ -252,9 +286,17 @@ impl Lpips {
         check_pair(pred, gt)?;
         let min = self.net.backbone.min_side();
         if pred.width < min || pred.height < min {
-            return Err(MetricError::TooSmall { metric: self.net.backbone.name(), min, width: pred.width, height: pred.height });
+            return Err(MetricError::TooSmall {
+                metric: self.net.backbone.name(),
+                min,
+                width: pred.width,
+                height: pred.height,
+            });
         }
-        let d = self.net.forward(image_tensor(pred, &self.device), image_tensor(gt, &self.device));
+        let d = self.net.forward(
+            image_tensor(pred, &self.device),
+            image_tensor(gt, &self.device),
+        );
         let v: f32 = d.into_scalar();
         Ok(f64::from(v))
     }

@@ -88,14 +88,46 @@ pub struct Column {
 
 /// The table's columns in the paper's order (LPIPS, not in the paper, last).
 pub const COLUMNS: [Column; 8] = [
-    Column { key: "psnr", title: "PSNR", higher_is_better: true },
-    Column { key: "ssim", title: "SSIM", higher_is_better: true },
-    Column { key: "fid", title: "FID", higher_is_better: false },
-    Column { key: "nima", title: "NIMA", higher_is_better: true },
-    Column { key: "brisque", title: "BRISQUE", higher_is_better: false },
-    Column { key: "d_fid", title: "D-FID", higher_is_better: false },
-    Column { key: "d_psnr", title: "D-PSNR", higher_is_better: true },
-    Column { key: "lpips", title: "LPIPS", higher_is_better: false },
+    Column {
+        key: "psnr",
+        title: "PSNR",
+        higher_is_better: true,
+    },
+    Column {
+        key: "ssim",
+        title: "SSIM",
+        higher_is_better: true,
+    },
+    Column {
+        key: "fid",
+        title: "FID",
+        higher_is_better: false,
+    },
+    Column {
+        key: "nima",
+        title: "NIMA",
+        higher_is_better: true,
+    },
+    Column {
+        key: "brisque",
+        title: "BRISQUE",
+        higher_is_better: false,
+    },
+    Column {
+        key: "d_fid",
+        title: "D-FID",
+        higher_is_better: false,
+    },
+    Column {
+        key: "d_psnr",
+        title: "D-PSNR",
+        higher_is_better: true,
+    },
+    Column {
+        key: "lpips",
+        title: "LPIPS",
+        higher_is_better: false,
+    },
 ];
 
 /// The results of one evaluation run.
@@ -128,7 +160,8 @@ impl EvalReport {
 
     /// Records that `key` could not be computed, and why.
     pub fn set_unavailable(&mut self, key: impl Into<String>, reason: impl Into<String>) {
-        self.values.insert(key.into(), Outcome::Unavailable(reason.into()));
+        self.values
+            .insert(key.into(), Outcome::Unavailable(reason.into()));
     }
 
     /// Records per-image values of `key` (one per image, in pairing order) and their mean as
@@ -173,7 +206,10 @@ impl EvalReport {
             })
             .collect();
         root.insert("per_image".into(), Value::Array(per_image));
-        root.insert("inf_encoding".into(), json!("PSNR of identical images is the string \"inf\""));
+        root.insert(
+            "inf_encoding".into(),
+            json!("PSNR of identical images is the string \"inf\""),
+        );
         Value::Object(root)
     }
 
@@ -181,7 +217,11 @@ impl EvalReport {
     pub fn to_markdown(&self) -> String {
         let mut out = String::from("| region |");
         for c in &COLUMNS {
-            out.push_str(&format!(" {} {} |", c.title, if c.higher_is_better { "↑" } else { "↓" }));
+            out.push_str(&format!(
+                " {} {} |",
+                c.title,
+                if c.higher_is_better { "↑" } else { "↓" }
+            ));
         }
         out.push_str("\n|---|");
         out.push_str(&"---:|".repeat(COLUMNS.len()));
@@ -277,10 +317,12 @@ mod tests {
         r.set_unavailable("fid", "needs 2 images");
         let md = r.to_markdown();
         let header = md.lines().next().unwrap();
-        let order: Vec<usize> = ["PSNR", "SSIM", "FID", "NIMA", "BRISQUE", "D-FID", "D-PSNR", "LPIPS"]
-            .iter()
-            .map(|t| header.find(&format!(" {t} ")).unwrap())
-            .collect();
+        let order: Vec<usize> = [
+            "PSNR", "SSIM", "FID", "NIMA", "BRISQUE", "D-FID", "D-PSNR", "LPIPS",
+        ]
+        .iter()
+        .map(|t| header.find(&format!(" {t} ")).unwrap())
+        .collect();
         assert!(order.windows(2).all(|w| w[0] < w[1]), "{header}");
         assert!(md.contains("| full image | 25.00 | - | n/a |"), "{md}");
         assert!(md.contains("| mask | - | 0.2500 |"), "{md}");

@@ -127,7 +127,11 @@ impl StLpipsAlexNet {
     /// Loads the network from the package's safetensors file; every tensor must be present
     /// with the expected shape, and no tensor may be left over.
     pub fn load(path: &Path, device: &Device) -> Result<Self, MetricError> {
-        let err = |reason: String| MetricError::Weights { path: path.to_path_buf(), what: "ST-LPIPS AlexNet", reason };
+        let err = |reason: String| MetricError::Weights {
+            path: path.to_path_buf(),
+            what: "ST-LPIPS AlexNet",
+            reason,
+        };
         if !path.is_file() {
             return Err(err("file not found".into()));
         }
@@ -136,7 +140,9 @@ impl StLpipsAlexNet {
             store = store.with_key_remapping(from, to);
         }
         let mut model = Self::empty(device);
-        let result = model.load_from(&mut store).map_err(|e| err(e.to_string()))?;
+        let result = model
+            .load_from(&mut store)
+            .map_err(|e| err(e.to_string()))?;
         if !result.unused.is_empty() {
             return Err(err(format!("unexpected tensors {:?}", result.unused)));
         }
@@ -175,7 +181,12 @@ fn max_pool3(x: Tensor<4>) -> Tensor<4> {
 fn blur_pool(x: Tensor<4>, filt: Tensor<4>) -> Tensor<4> {
     let channels = x.dims()[1];
     let padded = x.pad([(2, 2), (2, 2)], PadMode::Reflect);
-    conv2d(padded, filt, None, ConvOptions::new([2, 2], [0, 0], [1, 1], channels))
+    conv2d(
+        padded,
+        filt,
+        None,
+        ConvOptions::new([2, 2], [0, 0], [1, 1], channels),
+    )
 }
 
 /// The smallest side (in pixels) whose feature maps stay valid through every layer.
@@ -185,7 +196,9 @@ pub const MIN_SIDE: usize = 21;
 /// least 3 pixels, pooling at least 3).
 fn side_is_valid(n: usize) -> bool {
     let blur = |s: usize| (s + 4 - 3) / 2 + 1;
-    let Some(s1) = n.checked_sub(6) else { return false };
+    let Some(s1) = n.checked_sub(6) else {
+        return false;
+    };
     if s1 < 3 {
         return false;
     }
@@ -210,7 +223,10 @@ impl StLpips {
 
     /// Loads the network from `path` onto `device`.
     pub fn load(path: &Path, device: &Device) -> Result<Self, MetricError> {
-        Ok(Self { net: StLpipsAlexNet::load(path, device)?, device: device.clone() })
+        Ok(Self {
+            net: StLpipsAlexNet::load(path, device)?,
+            device: device.clone(),
+        })
     }
 
     /// ST-LPIPS distance between `pred` and `gt` (lower is better; 0 for identical images).
@@ -224,7 +240,10 @@ impl StLpips {
                 height: pred.height,
             });
         }
-        let d = self.net.forward(image_tensor(pred, &self.device), image_tensor(gt, &self.device));
+        let d = self.net.forward(
+            image_tensor(pred, &self.device),
+            image_tensor(gt, &self.device),
+        );
         let v: f32 = d.into_scalar();
         Ok(f64::from(v))
     }
@@ -248,7 +267,11 @@ pub(crate) fn crop(img: &RgbImage, x0: usize, y0: usize, x1: usize, y1: usize) -
     for y in y0..y1 {
         data.extend_from_slice(&img.data[(y * img.width + x0) * 3..(y * img.width + x1) * 3]);
     }
-    RgbImage { width: x1 - x0, height: y1 - y0, data }
+    RgbImage {
+        width: x1 - x0,
+        height: y1 - y0,
+        data,
+    }
 }
 
 #[cfg(test)]

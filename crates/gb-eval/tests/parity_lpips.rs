@@ -79,12 +79,21 @@ fn write_formula_weights(backbone: Backbone, path: &Path) {
         .enumerate()
         .map(|(t, (key, shape))| {
             let vals = formula(t, &shape, &key);
-            (key, shape, vals.iter().flat_map(|v| v.to_le_bytes()).collect())
+            (
+                key,
+                shape,
+                vals.iter().flat_map(|v| v.to_le_bytes()).collect(),
+            )
         })
         .collect();
     let views: HashMap<String, TensorView<'_>> = bytes
         .iter()
-        .map(|(k, s, b)| (k.clone(), TensorView::new(Dtype::F32, s.clone(), b).unwrap()))
+        .map(|(k, s, b)| {
+            (
+                k.clone(),
+                TensorView::new(Dtype::F32, s.clone(), b).unwrap(),
+            )
+        })
         .collect();
     safetensors::serialize_to_file(views, None, path).unwrap();
 }
@@ -97,10 +106,19 @@ fn check_backbone(backbone: Backbone, key: &'static str) {
     let doc = expected();
     let mut dev = Deviation::new(key, TOL);
     let mut seen = 0;
-    for c in doc["cases"].as_array().unwrap().iter().filter(|c| c.get(key).is_some()) {
+    for c in doc["cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| c.get(key).is_some())
+    {
         let gt = image(c["gt"].as_str().unwrap());
         let pred = image(c["pred"].as_str().unwrap());
-        dev.check(c["name"].as_str().unwrap(), model.distance(&pred, &gt).unwrap(), number(&c[key]));
+        dev.check(
+            c["name"].as_str().unwrap(),
+            model.distance(&pred, &gt).unwrap(),
+            number(&c[key]),
+        );
         seen += 1;
     }
     assert!(seen >= 3, "{key}: only {seen} cases");
@@ -122,8 +140,16 @@ fn a_file_without_the_backbone_is_rejected_with_its_name() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("heads_only.safetensors");
     let b = vec![0u8; 64 * 4];
-    let views = HashMap::from([("lin0.model.1.weight".to_string(), TensorView::new(Dtype::F32, vec![1, 64, 1, 1], &b).unwrap())]);
+    let views = HashMap::from([(
+        "lin0.model.1.weight".to_string(),
+        TensorView::new(Dtype::F32, vec![1, 64, 1, 1], &b).unwrap(),
+    )]);
     safetensors::serialize_to_file(views, None, &path).unwrap();
-    let err = Lpips::load(&path, Backbone::Alex, &BackendKind::Flex.device()).unwrap_err().to_string();
-    assert!(err.contains("heads_only.safetensors") && err.contains("missing"), "{err}");
+    let err = Lpips::load(&path, Backbone::Alex, &BackendKind::Flex.device())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("heads_only.safetensors") && err.contains("missing"),
+        "{err}"
+    );
 }

@@ -22,19 +22,57 @@ fn psnr_and_ssim_match_scikit_image_on_every_region() {
         let gt = image(c["gt"].as_str().unwrap());
         let pred = image(c["pred"].as_str().unwrap());
         let m = mask(c["mask"].as_str().unwrap());
-        let b: Vec<usize> = c["bbox"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
-        let bbox = Region::BBox { x0: b[0], y0: b[1], x1: b[2], y1: b[3] };
-        assert_eq!(Region::bbox_of_mask(&m, gt.width), Some(bbox.clone()), "{name}: bbox");
+        let b: Vec<usize> = c["bbox"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap() as usize)
+            .collect();
+        let bbox = Region::BBox {
+            x0: b[0],
+            y0: b[1],
+            x1: b[2],
+            y1: b[3],
+        };
+        assert_eq!(
+            Region::bbox_of_mask(&m, gt.width),
+            Some(bbox.clone()),
+            "{name}: bbox"
+        );
         let full = Region::Full;
         let masked = Region::Mask(m);
         dev_psnr.check(name, psnr(&pred, &gt, &full).unwrap(), number(&c["psnr"]));
-        dev_psnr.check(name, psnr(&pred, &gt, &bbox).unwrap(), number(&c["psnr_bbox"]));
-        dev_psnr.check(name, psnr(&pred, &gt, &masked).unwrap(), number(&c["psnr_mask"]));
+        dev_psnr.check(
+            name,
+            psnr(&pred, &gt, &bbox).unwrap(),
+            number(&c["psnr_bbox"]),
+        );
+        dev_psnr.check(
+            name,
+            psnr(&pred, &gt, &masked).unwrap(),
+            number(&c["psnr_mask"]),
+        );
         dev_ssim.check(name, ssim(&pred, &gt, &full).unwrap(), number(&c["ssim"]));
-        dev_ssim.check(name, ssim(&pred, &gt, &bbox).unwrap(), number(&c["ssim_bbox"]));
-        dev_ssim.check(name, ssim(&pred, &gt, &masked).unwrap(), number(&c["ssim_mask"]));
-        dev_ssim.check(name, ssim_luminance(&pred, &gt, &full).unwrap(), number(&c["ssim_luminance"]));
-        dev_ssim.check(name, ssim_luminance(&pred, &gt, &masked).unwrap(), number(&c["ssim_luminance_mask"]));
+        dev_ssim.check(
+            name,
+            ssim(&pred, &gt, &bbox).unwrap(),
+            number(&c["ssim_bbox"]),
+        );
+        dev_ssim.check(
+            name,
+            ssim(&pred, &gt, &masked).unwrap(),
+            number(&c["ssim_mask"]),
+        );
+        dev_ssim.check(
+            name,
+            ssim_luminance(&pred, &gt, &full).unwrap(),
+            number(&c["ssim_luminance"]),
+        );
+        dev_ssim.check(
+            name,
+            ssim_luminance(&pred, &gt, &masked).unwrap(),
+            number(&c["ssim_luminance_mask"]),
+        );
     }
     dev_psnr.report();
     dev_ssim.report();
@@ -43,7 +81,12 @@ fn psnr_and_ssim_match_scikit_image_on_every_region() {
 #[test]
 fn identical_images_give_infinite_psnr_and_unit_ssim() {
     let doc = expected();
-    let c = doc["cases"].as_array().unwrap().iter().find(|c| c["name"] == "identical").expect("identical case");
+    let c = doc["cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["name"] == "identical")
+        .expect("identical case");
     assert_eq!(c["psnr"], "inf");
     let img = image(c["gt"].as_str().unwrap());
     assert_eq!(psnr(&img, &img, &Region::Full).unwrap(), f64::INFINITY);
@@ -54,7 +97,12 @@ fn identical_images_give_infinite_psnr_and_unit_ssim() {
 fn constant_images_follow_the_closed_form() {
     // Two constants a, b: variances vanish, so SSIM = (2ab + C1) / (a^2 + b^2 + C1).
     let doc = expected();
-    let c = doc["cases"].as_array().unwrap().iter().find(|c| c["name"] == "constant_pair").expect("constant case");
+    let c = doc["cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["name"] == "constant_pair")
+        .expect("constant case");
     let gt = image(c["gt"].as_str().unwrap());
     let pred = image(c["pred"].as_str().unwrap());
     let (a, b) = (f64::from(gt.data[0]), f64::from(pred.data[0]));
@@ -81,9 +129,14 @@ fn d_psnr_matches_the_reference_convention() {
     let mut dev = Deviation::new("D-PSNR", TOL);
     for c in doc["depth_cases"].as_array().unwrap() {
         let dir = fixture_dir().join("depth");
-        let p = read_disparity(&dir.join(c["pred"].as_str().unwrap()), DepthKind::Disparity).unwrap();
+        let p =
+            read_disparity(&dir.join(c["pred"].as_str().unwrap()), DepthKind::Disparity).unwrap();
         let g = read_disparity(&dir.join(c["gt"].as_str().unwrap()), DepthKind::Disparity).unwrap();
-        dev.check(c["name"].as_str().unwrap(), d_psnr(&p, &g, &Region::Full).unwrap(), number(&c["d_psnr"]));
+        dev.check(
+            c["name"].as_str().unwrap(),
+            d_psnr(&p, &g, &Region::Full).unwrap(),
+            number(&c["d_psnr"]),
+        );
     }
     dev.report();
 }

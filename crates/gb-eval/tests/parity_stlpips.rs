@@ -22,12 +22,20 @@ fn stlpips_matches_the_package_on_every_backend() {
         let model = StLpips::load(&weights(), &kind.device()).expect("weights load");
         let mut dev = Deviation::new("ST-LPIPS", TOL);
         // wgpu runs on a software rasteriser here: keep it to a few small cases.
-        let take = if kind == gb_core::BackendKind::Wgpu { 3 } else { cases.len() };
+        let take = if kind == gb_core::BackendKind::Wgpu {
+            3
+        } else {
+            cases.len()
+        };
         for c in cases.iter().take(take) {
             let name = c["name"].as_str().unwrap();
             let gt = image(c["gt"].as_str().unwrap());
             let pred = image(c["pred"].as_str().unwrap());
-            dev.check(name, model.distance(&pred, &gt).unwrap(), number(&c["stlpips"]));
+            dev.check(
+                name,
+                model.distance(&pred, &gt).unwrap(),
+                number(&c["stlpips"]),
+            );
         }
         println!("backend {kind}:");
         dev.report();
@@ -40,13 +48,19 @@ fn identical_images_are_at_distance_zero_and_tiny_images_are_rejected() {
     let img = image("fern_blur_gt.png");
     assert_eq!(model.distance(&img, &img).unwrap(), 0.0);
     let tiny = gb_core::RgbImage::filled(20, 40, [0.5; 3]);
-    assert!(matches!(model.distance(&tiny, &tiny), Err(MetricError::TooSmall { min: 21, .. })));
+    assert!(matches!(
+        model.distance(&tiny, &tiny),
+        Err(MetricError::TooSmall { min: 21, .. })
+    ));
 }
 
 #[test]
 fn missing_weights_name_the_file() {
-    let err = StLpips::load(std::path::Path::new("/nonexistent/stlpips.safetensors"), &gb_core::BackendKind::Flex.device())
-        .unwrap_err()
-        .to_string();
+    let err = StLpips::load(
+        std::path::Path::new("/nonexistent/stlpips.safetensors"),
+        &gb_core::BackendKind::Flex.device(),
+    )
+    .unwrap_err()
+    .to_string();
     assert!(err.contains("/nonexistent/stlpips.safetensors"), "{err}");
 }

@@ -17,8 +17,12 @@ pub struct Args {
 enum What {
     /// Time per image of each evaluation metric, against the Python references.
     Eval(super::bench_eval::Args),
-    /// NeRF training steps/s and rays/s per preset and backend, against PyTorch on the CPU.
+    /// NeRF training speed per preset and backend, against plain PyTorch on this CPU.
     Nerf(super::bench_nerf::Args),
+    /// U-Net / VAE forward time at SD-1.5 size, against diffusers on this CPU.
+    Unet(super::bench_unet::Args),
+    /// One guidance step of SDS, CSD and BSD, and BSD's saving over CSD.
+    Distill(super::distill_bench::Args),
 }
 
 /// Runs the chosen benchmark.
@@ -26,6 +30,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match args.what {
         What::Eval(a) => super::bench_eval::run(a),
         What::Nerf(a) => super::bench_nerf::run(a),
+        What::Unet(a) => super::bench_unet::run(a),
+        What::Distill(a) => super::distill_bench::run(a),
     }
 }
 
@@ -33,8 +39,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 pub fn machine_description() -> serde_json::Value {
     let cpu = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
         .unwrap_or_else(|| "unknown".into());
-    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0);
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(0);
     serde_json::json!({ "cpu": cpu, "logical_cores": cores, "os": std::env::consts::OS, "arch": std::env::consts::ARCH })
 }

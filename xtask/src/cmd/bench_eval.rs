@@ -45,7 +45,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.images == 0 || args.repeats == 0 {
         bail!("--images and --repeats must be at least 1");
     }
-    let data = match args.data.clone().or_else(|| std::env::var_os("GB_TEST_DATA").map(PathBuf::from)) {
+    let data = match args
+        .data
+        .clone()
+        .or_else(|| std::env::var_os("GB_TEST_DATA").map(PathBuf::from))
+    {
         Some(d) => d,
         None => bail!("no shared data folder: pass --data DIR or set GB_TEST_DATA"),
     };
@@ -70,10 +74,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "python": python,
         "largest_value_difference": agreement,
     });
-    std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("{}: cannot create", args.out.display()))?;
     let path = args.out.join(format!("eval-{device}.json"));
     let text = serde_json::to_string_pretty(&doc)? + "\n";
-    gb_core::write_atomic(&path, text.as_bytes()).with_context(|| format!("{}: cannot write", path.display()))?;
+    gb_core::write_atomic(&path, text.as_bytes())
+        .with_context(|| format!("{}: cannot write", path.display()))?;
     println!("{text}");
     println!("written to {}", path.display());
     Ok(())
@@ -89,7 +95,11 @@ fn write_pairs(data: &Path, tmp: &Path, n: usize) -> anyhow::Result<(PathBuf, Pa
         .collect();
     files.sort();
     if files.len() < n {
-        bail!("{} holds {} images, fewer than --images {n}", src.display(), files.len());
+        bail!(
+            "{} holds {} images, fewer than --images {n}",
+            src.display(),
+            files.len()
+        );
     }
     let (pred_dir, gt_dir) = (tmp.join("pred"), tmp.join("gt"));
     for d in [&pred_dir, &gt_dir] {
@@ -130,13 +140,29 @@ fn timed(repeats: usize, mut f: impl FnMut() -> anyhow::Result<f64>) -> anyhow::
 }
 
 fn luminance_map(img: &RgbImage) -> ScalarMap {
-    let data = img.data.chunks_exact(3).map(|p| 0.1 + 0.2125 * p[0] + 0.7154 * p[1] + 0.0721 * p[2]).collect();
-    ScalarMap { width: img.width, height: img.height, data }
+    let data = img
+        .data
+        .chunks_exact(3)
+        .map(|p| 0.1 + 0.2125 * p[0] + 0.7154 * p[1] + 0.0721 * p[2])
+        .collect();
+    ScalarMap {
+        width: img.width,
+        height: img.height,
+        data,
+    }
 }
 
-fn time_rust(pred_dir: &Path, gt_dir: &Path, weights: &Path, device: BackendKind, repeats: usize) -> anyhow::Result<Value> {
+fn time_rust(
+    pred_dir: &Path,
+    gt_dir: &Path,
+    weights: &Path,
+    device: BackendKind,
+    repeats: usize,
+) -> anyhow::Result<Value> {
     let model = StLpips::load(weights, &device.device())?;
-    let mut files: Vec<PathBuf> = std::fs::read_dir(gt_dir)?.filter_map(|e| e.ok().map(|e| e.path())).collect();
+    let mut files: Vec<PathBuf> = std::fs::read_dir(gt_dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .collect();
     files.sort();
     let names = ["psnr", "ssim", "lpips", "d_psnr"];
     let mut secs = [0.0f64; 4];
@@ -159,8 +185,16 @@ fn time_rust(pred_dir: &Path, gt_dir: &Path, weights: &Path, device: BackendKind
             values[k].push(v);
         }
     }
-    let per: serde_json::Map<String, Value> = names.iter().zip(secs).map(|(n, s)| (n.to_string(), json!(s))).collect();
-    let vals: serde_json::Map<String, Value> = names.iter().zip(values).map(|(n, v)| (n.to_string(), json!(v))).collect();
+    let per: serde_json::Map<String, Value> = names
+        .iter()
+        .zip(secs)
+        .map(|(n, s)| (n.to_string(), json!(s)))
+        .collect();
+    let vals: serde_json::Map<String, Value> = names
+        .iter()
+        .zip(values)
+        .map(|(n, v)| (n.to_string(), json!(v)))
+        .collect();
     Ok(json!({ "seconds_per_image": per, "values": vals }))
 }
 
@@ -173,13 +207,26 @@ fn time_python(args: &Args, pred_dir: &Path, gt_dir: &Path, weights: &Path) -> V
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tools/eval_parity/bench_ref.py");
     let out = Command::new(&python)
         .arg(&script)
-        .args(["--pred", &pred_dir.to_string_lossy(), "--gt", &gt_dir.to_string_lossy()])
-        .args(["--weights", &weights.to_string_lossy(), "--repeats", &args.repeats.to_string()])
+        .args([
+            "--pred",
+            &pred_dir.to_string_lossy(),
+            "--gt",
+            &gt_dir.to_string_lossy(),
+        ])
+        .args([
+            "--weights",
+            &weights.to_string_lossy(),
+            "--repeats",
+            &args.repeats.to_string(),
+        ])
         .output();
     match out {
-        Ok(o) if o.status.success() => serde_json::from_slice(&o.stdout)
-            .unwrap_or_else(|e| json!({ "unavailable": format!("cannot parse the reference output: {e}") })),
-        Ok(o) => json!({ "unavailable": format!("{} failed: {}", python.display(), String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("")) }),
+        Ok(o) if o.status.success() => serde_json::from_slice(&o.stdout).unwrap_or_else(
+            |e| json!({ "unavailable": format!("cannot parse the reference output: {e}") }),
+        ),
+        Ok(o) => {
+            json!({ "unavailable": format!("{} failed: {}", python.display(), String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("")) })
+        }
         Err(e) => json!({ "unavailable": format!("cannot run {}: {e}", python.display()) }),
     }
 }
@@ -188,8 +235,17 @@ fn time_python(args: &Args, pred_dir: &Path, gt_dir: &Path, weights: &Path) -> V
 fn agreement(rust: &Value, python: &Value) -> Value {
     let mut out = serde_json::Map::new();
     for key in ["psnr", "ssim", "lpips"] {
-        let (Some(r), Some(p)) = (rust["values"][key].as_array(), python["values"][key].as_array()) else { continue };
-        let d = r.iter().zip(p).filter_map(|(a, b)| Some((a.as_f64()? - b.as_f64()?).abs())).fold(0.0, f64::max);
+        let (Some(r), Some(p)) = (
+            rust["values"][key].as_array(),
+            python["values"][key].as_array(),
+        ) else {
+            continue;
+        };
+        let d = r
+            .iter()
+            .zip(p)
+            .filter_map(|(a, b)| Some((a.as_f64()? - b.as_f64()?).abs()))
+            .fold(0.0, f64::max);
         out.insert(key.into(), json!(d));
     }
     Value::Object(out)

@@ -131,7 +131,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             rows.push(json!({
                 "preset": preset, "device": device.name(), "steps_per_s": sps,
                 "rays_per_s": sps * cfg.train.rays_per_batch as f64,
-                "evaluations_per_ray": evals / args.steps as f64,
+                "evaluations_per_ray": evals as f64 / args.steps as f64,
                 "samples_per_ray": cfg.sampler.samples_per_ray,
             }));
         }

@@ -1,6 +1,6 @@
 //! `cargo xtask devices`: which backends work on this machine.
 
-use burn::tensor::{ElementConversion, Tensor};
+use burn::tensor::Tensor;
 use gb_core::BackendKind;
 
 /// Arguments of `cargo xtask devices`.
@@ -22,7 +22,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let outcome = std::panic::catch_unwind(|| {
             let device = kind.device();
             let a = Tensor::<2>::ones([64, 64], &device);
-            let s: f32 = a.clone().matmul(a).sum().into_scalar().elem();
+            let s: f32 = a.clone().matmul(a).sum().into_scalar::<f32>();
             s
         });
         match outcome {

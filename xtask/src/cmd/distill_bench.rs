@@ -42,22 +42,42 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("loading the prior from {}", args.prior.display()))?;
     let res = args.resolution.unwrap_or(prior.resolution);
     let repeats = args.repeats.max(1);
-    let pixels: Vec<f32> = (0..3 * res * res).map(|i| ((i * 7919) % 997) as f32 / 997.0).collect();
+    let pixels: Vec<f32> = (0..3 * res * res)
+        .map(|i| ((i * 7919) % 997) as f32 / 997.0)
+        .collect();
     let mask: Vec<f32> = (0..res * res)
-        .map(|i| if (i % res) >= res / 4 && (i % res) < 3 * res / 4 { 1.0 } else { 0.0 })
+        .map(|i| {
+            if (i % res) >= res / 4 && (i % res) < 3 * res / 4 {
+                1.0
+            } else {
+                0.0
+            }
+        })
         .collect();
     let image = Tensor::<4>::from_data(TensorData::new(pixels, [1, 3, res, res]), &device);
     let mask = Tensor::<4>::from_data(TensorData::new(mask, [1, 1, res, res]), &device);
     let view = ViewConditioning::new(0, &prior.encoder, image.clone(), mask, res)?;
-    let models = PriorModels { unet: &prior.unet, encoder: &prior.encoder };
+    let models = PriorModels {
+        unet: &prior.unet,
+        encoder: &prior.encoder,
+    };
     let mut cache = PromptCache::new();
     let mut rows = Vec::new();
     for method in [
-        GuidanceMethod::Sds { guidance_scale: 7.5 },
-        GuidanceMethod::Csd { w1: 7.5, w2: 6.5, w3: None },
+        GuidanceMethod::Sds {
+            guidance_scale: 7.5,
+        },
+        GuidanceMethod::Csd {
+            w1: 7.5,
+            w2: 6.5,
+            w3: None,
+        },
         GuidanceMethod::Bsd { w1: 7.5, w2: 6.5 },
     ] {
-        let settings = DistillSettings { guidance: method, ..DistillSettings::paper_rgb() };
+        let settings = DistillSettings {
+            guidance: method,
+            ..DistillSettings::paper_rgb()
+        };
         let mut distiller = ScoreDistiller::new(&settings, prior.alphas.clone(), 0)?;
         let prompts = cache.for_guidance(&prior.text, distiller.guidance(), "a photo", "blurry")?;
         let mut times = Vec::new();
@@ -65,7 +85,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for i in 0..=repeats {
             let start = Instant::now();
             let render = image.clone().autodiff().require_grad();
-            let out = distill_view(&mut distiller, &models, render.clone(), &view, 0, PriorInputMode::RenderOnly, &prompts)?;
+            let out = distill_view(
+                &mut distiller,
+                &models,
+                render.clone(),
+                &view,
+                0,
+                PriorInputMode::RenderOnly,
+                &prompts,
+            )?;
             let grads = out.loss.backward();
             let g = render.grad(&grads).context("no gradient")?;
             let _sync: f32 = g.sum().into_scalar::<f32>();
@@ -76,13 +104,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         times.sort_by(f64::total_cmp);
         let median = times[times.len() / 2];
-        tracing::info!(method = distiller.guidance().name(), batch, median_ms = median, "step time");
+        tracing::info!(
+            method = distiller.guidance().name(),
+            batch,
+            median_ms = median,
+            "step time"
+        );
         rows.push((distiller.guidance().name(), batch, median, times));
     }
-    let ms = |name: &str| rows.iter().find(|r| r.0 == name).map(|r| r.2).unwrap_or(f64::NAN);
+    let ms = |name: &str| {
+        rows.iter()
+            .find(|r| r.0 == name)
+            .map(|r| r.2)
+            .unwrap_or(f64::NAN)
+    };
     let machine = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
         .unwrap_or_else(|| "unknown".into());
     let json = serde_json::json!({
         "benchmark": "distill step (VAE encoder fwd+bwd + one batched U-Net call)",

@@ -103,14 +103,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("loading the prior from {}", args.prior.display()))?;
     let resolution = args.resolution.unwrap_or(prior.resolution);
     let guidance = match args.method {
-        Method::Sds => GuidanceMethod::Sds { guidance_scale: args.w1 },
-        Method::Csd => GuidanceMethod::Csd { w1: args.w1, w2: args.w2, w3: args.w3 },
-        Method::Bsd => GuidanceMethod::Bsd { w1: args.w1, w2: args.w2 },
+        Method::Sds => GuidanceMethod::Sds {
+            guidance_scale: args.w1,
+        },
+        Method::Csd => GuidanceMethod::Csd {
+            w1: args.w1,
+            w2: args.w2,
+            w3: args.w3,
+        },
+        Method::Bsd => GuidanceMethod::Bsd {
+            w1: args.w1,
+            w2: args.w2,
+        },
     };
     let settings = DistillSettings {
         guidance,
         timesteps: TimestepConfig::default(),
-        weighting: if args.constant_weight { Weighting::Constant } else { Weighting::OneMinusAlphaBar },
+        weighting: if args.constant_weight {
+            Weighting::Constant
+        } else {
+            Weighting::OneMinusAlphaBar
+        },
         grad_clamp: args.grad_clamp,
     };
     let mut distiller = ScoreDistiller::new(&settings, prior.alphas.clone(), args.seed)?;
@@ -125,7 +138,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &args.prompt,
         &args.negative_prompt,
     )?;
-    let models = PriorModels { unet: &prior.unet, encoder: &prior.encoder };
+    let models = PriorModels {
+        unet: &prior.unet,
+        encoder: &prior.encoder,
+    };
     tracing::info!(
         method = distiller.guidance().name(),
         resolution,
@@ -140,7 +156,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut snapshots = vec![image.clone()];
     let mut log = String::new();
     let bar = ProgressBar::new(args.steps as u64);
-    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
     for step in 1..=args.steps {
         let render = pixels.clone().autodiff().require_grad();
         let out = distill_view(
@@ -158,9 +177,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .context("no gradient reached the pixels")?;
         pixels = adam.step(pixels, grad).clamp(0.0, 1.0);
         let d = &out.diagnostics;
-        bar.set_message(format!("t={} loss={:.3e} |g|={:.3e}", d.timestep, d.loss, d.grad_norm));
+        bar.set_message(format!(
+            "t={} loss={:.3e} |g|={:.3e}",
+            d.timestep, d.loss, d.grad_norm
+        ));
         bar.inc(1);
-        tracing::debug!(step, t = d.timestep, loss = d.loss, grad_norm = d.grad_norm, "step");
+        tracing::debug!(
+            step,
+            t = d.timestep,
+            loss = d.loss,
+            grad_norm = d.grad_norm,
+            "step"
+        );
         log.push_str(&serde_json::to_string(&serde_json::json!({
             "step": step, "t": d.timestep, "weight": d.weight, "loss": d.loss,
             "grad_norm": d.grad_norm, "unet_calls": d.unet_calls, "unet_batch": d.unet_batch,
@@ -175,7 +203,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish();
     gb_core::write_atomic(&args.out.join("log.jsonl"), log.as_bytes())?;
     write_rgb_png(&args.out.join("grid.png"), &grid(&snapshots))?;
-    tracing::info!("wrote {} snapshots and grid.png to {}", snapshots.len() - 1, args.out.display());
+    tracing::info!(
+        "wrote {} snapshots and grid.png to {}",
+        snapshots.len() - 1,
+        args.out.display()
+    );
     Ok(())
 }
 
@@ -183,11 +215,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 fn read_mask(path: &Path, width: usize, height: usize) -> anyhow::Result<Vec<f32>> {
     let (mw, mh, values) = read_gray(path).with_context(|| "reading --mask".to_string())?;
     if (mw, mh) != (width, height) {
-        bail!("{}: mask is {mw}x{mh} but the image is {width}x{height}", path.display());
+        bail!(
+            "{}: mask is {mw}x{mh} but the image is {width}x{height}",
+            path.display()
+        );
     }
     let max = values.iter().cloned().fold(0.0f32, f32::max);
-    let threshold = if max > 0.0 && max < 0.5 { max * 0.5 } else { 0.5 };
-    let mask: Vec<f32> = values.iter().map(|&v| if v >= threshold && v > 0.0 { 1.0 } else { 0.0 }).collect();
+    let threshold = if max > 0.0 && max < 0.5 {
+        max * 0.5
+    } else {
+        0.5
+    };
+    let mask: Vec<f32> = values
+        .iter()
+        .map(|&v| if v >= threshold && v > 0.0 { 1.0 } else { 0.0 })
+        .collect();
     if !mask.iter().any(|&v| v > 0.0) {
         bail!("{}: the mask is empty (no white pixel)", path.display());
     }
@@ -195,7 +237,10 @@ fn read_mask(path: &Path, width: usize, height: usize) -> anyhow::Result<Vec<f32
 }
 
 fn to_tensor(img: &RgbImage, device: &burn::tensor::Device) -> Tensor<4> {
-    let hwc = Tensor::<3>::from_data(TensorData::new(img.data.clone(), [img.height, img.width, 3]), device);
+    let hwc = Tensor::<3>::from_data(
+        TensorData::new(img.data.clone(), [img.height, img.width, 3]),
+        device,
+    );
     hwc.permute([2, 0, 1]).unsqueeze()
 }
 
@@ -206,7 +251,11 @@ fn to_image(t: Tensor<4>, width: usize, height: usize) -> anyhow::Result<RgbImag
         .into_data()
         .try_into_vec_as::<f32>()
         .map_err(|e| anyhow::anyhow!("reading the image back: {e:?}"))?;
-    Ok(RgbImage { width, height, data })
+    Ok(RgbImage {
+        width,
+        height,
+        data,
+    })
 }
 
 /// The snapshots side by side (input first).
@@ -233,7 +282,12 @@ struct Adam {
 
 impl Adam {
     fn new(like: &Tensor<4>, lr: f32) -> Self {
-        Self { m: like.zeros_like(), v: like.zeros_like(), lr, t: 0 }
+        Self {
+            m: like.zeros_like(),
+            v: like.zeros_like(),
+            lr,
+            t: 0,
+        }
     }
 
     fn step(&mut self, p: Tensor<4>, g: Tensor<4>) -> Tensor<4> {

@@ -127,7 +127,11 @@ enum LpipsModel {
 }
 
 impl LpipsModel {
-    fn load(net: LpipsNetArg, path: &std::path::Path, device: BackendKind) -> Result<Self, MetricError> {
+    fn load(
+        net: LpipsNetArg,
+        path: &std::path::Path,
+        device: BackendKind,
+    ) -> Result<Self, MetricError> {
         let device = device.device();
         Ok(match net {
             LpipsNetArg::StAlex => LpipsModel::Shift(StLpips::load(path, &device)?),
@@ -140,11 +144,16 @@ impl LpipsModel {
         match (self, region) {
             (LpipsModel::Shift(m), Region::Full) => m.distance(p, g),
             (LpipsModel::Standard(m), Region::Full) => m.distance(p, g),
-            (LpipsModel::Shift(m), Region::BBox { x0, y0, x1, y1 }) => m.distance_bbox(p, g, (*x0, *y0, *x1, *y1)),
-            (LpipsModel::Standard(m), Region::BBox { x0, y0, x1, y1 }) => m.distance_bbox(p, g, (*x0, *y0, *x1, *y1)),
-            (_, Region::Mask(_)) => {
-                Err(MetricError::InvalidInput { what: "LPIPS", reason: "has no per-pixel mask variant".into() })
+            (LpipsModel::Shift(m), Region::BBox { x0, y0, x1, y1 }) => {
+                m.distance_bbox(p, g, (*x0, *y0, *x1, *y1))
             }
+            (LpipsModel::Standard(m), Region::BBox { x0, y0, x1, y1 }) => {
+                m.distance_bbox(p, g, (*x0, *y0, *x1, *y1))
+            }
+            (_, Region::Mask(_)) => Err(MetricError::InvalidInput {
+                what: "LPIPS",
+                reason: "has no per-pixel mask variant".into(),
+            }),
         }
     }
 }
@@ -180,13 +189,41 @@ struct Metric {
 
 /// The dispatch table: one entry per metric (see the module docs to add one).
 const METRICS: &[Metric] = &[
-    Metric { name: "psnr", needs_depth: false, run: run_psnr },
-    Metric { name: "ssim", needs_depth: false, run: run_ssim },
-    Metric { name: "lpips", needs_depth: false, run: run_lpips },
-    Metric { name: "d_psnr", needs_depth: true, run: run_d_psnr },
-    Metric { name: "fid", needs_depth: false, run: run_fid },
-    Metric { name: "brisque", needs_depth: false, run: run_brisque },
-    Metric { name: "d_fid", needs_depth: true, run: run_d_fid },
+    Metric {
+        name: "psnr",
+        needs_depth: false,
+        run: run_psnr,
+    },
+    Metric {
+        name: "ssim",
+        needs_depth: false,
+        run: run_ssim,
+    },
+    Metric {
+        name: "lpips",
+        needs_depth: false,
+        run: run_lpips,
+    },
+    Metric {
+        name: "d_psnr",
+        needs_depth: true,
+        run: run_d_psnr,
+    },
+    Metric {
+        name: "fid",
+        needs_depth: false,
+        run: run_fid,
+    },
+    Metric {
+        name: "brisque",
+        needs_depth: false,
+        run: run_brisque,
+    },
+    Metric {
+        name: "d_fid",
+        needs_depth: true,
+        run: run_d_fid,
+    },
 ];
 
 /// Sets with at least this many pairs get a progress bar.
@@ -199,7 +236,8 @@ impl Ctx {
             return ProgressBar::hidden();
         }
         let pb = ProgressBar::new(len as u64);
-        if let Ok(style) = ProgressStyle::with_template("{msg:>8} [{bar:30}] {pos}/{len} {elapsed}") {
+        if let Ok(style) = ProgressStyle::with_template("{msg:>8} [{bar:30}] {pos}/{len} {elapsed}")
+        {
             pb.set_style(style);
         }
         pb.set_message(what.to_string());
@@ -208,7 +246,12 @@ impl Ctx {
 
     /// The weights file `name` in the weights folder; if it is missing, marks `keys`
     /// unavailable with the reason and returns `None`.
-    pub fn weights_file(&self, name: &str, report: &mut EvalReport, keys: &[String]) -> Option<PathBuf> {
+    pub fn weights_file(
+        &self,
+        name: &str,
+        report: &mut EvalReport,
+        keys: &[String],
+    ) -> Option<PathBuf> {
         let reason = match &self.weights {
             Some(dir) if dir.join(name).is_file() => return Some(dir.join(name)),
             Some(dir) => format!("weights file {} not found", dir.join(name).display()),
@@ -228,16 +271,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         DepthKindArg::Depth => DepthKind::Depth,
     };
     let depth_dirs = args.pred_depth.as_deref().zip(args.gt_depth.as_deref());
-    let inputs = EvalInputs::from_dirs(&args.pred, &args.gt, args.masks.as_deref(), depth_dirs, depth_kind)?;
+    let inputs = EvalInputs::from_dirs(
+        &args.pred,
+        &args.gt,
+        args.masks.as_deref(),
+        depth_dirs,
+        depth_kind,
+    )?;
     let requested = requested_metrics(args.metrics.as_deref(), depth_dirs.is_some())?;
     let weights = args.weights.clone().or_else(default_weights_dir);
-    let ctx = Ctx { inputs, weights, device: args.device.unwrap_or_default(), lpips_net: args.lpips_net };
+    let ctx = Ctx {
+        inputs,
+        weights,
+        device: args.device.unwrap_or_default(),
+        lpips_net: args.lpips_net,
+    };
 
     let mut report = EvalReport::new(&ctx.inputs.names);
-    report.context.insert("pred".into(), args.pred.display().to_string());
-    report.context.insert("gt".into(), args.gt.display().to_string());
-    report.context.insert("device".into(), ctx.device.to_string());
-    report.context.insert("lpips_net".into(), ctx.lpips_net.name().to_string());
+    report
+        .context
+        .insert("pred".into(), args.pred.display().to_string());
+    report
+        .context
+        .insert("gt".into(), args.gt.display().to_string());
+    report
+        .context
+        .insert("device".into(), ctx.device.to_string());
+    report
+        .context
+        .insert("lpips_net".into(), ctx.lpips_net.name().to_string());
     tracing::info!(pairs = ctx.inputs.len(), metrics = ?requested, "evaluating");
     for name in &requested {
         match METRICS.iter().find(|m| m.name == name) {
@@ -249,11 +311,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let markdown = report.to_markdown();
     print!("{markdown}");
     if let Some(path) = &args.markdown {
-        gb_core::write_atomic(path, markdown.as_bytes()).with_context(|| format!("{}: cannot write", path.display()))?;
+        gb_core::write_atomic(path, markdown.as_bytes())
+            .with_context(|| format!("{}: cannot write", path.display()))?;
     }
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&report.to_json())? + "\n";
-        gb_core::write_atomic(path, text.as_bytes()).with_context(|| format!("{}: cannot write", path.display()))?;
+        gb_core::write_atomic(path, text.as_bytes())
+            .with_context(|| format!("{}: cannot write", path.display()))?;
     }
     Ok(())
 }
@@ -268,7 +332,10 @@ fn requested_metrics(list: Option<&[String]>, have_depth: bool) -> anyhow::Resul
             for raw in list {
                 let name = raw.trim().to_ascii_lowercase().replace('-', "_");
                 if !known.contains(&name.as_str()) {
-                    bail!("unknown metric '{raw}': expected some of {}", known.join(", "));
+                    bail!(
+                        "unknown metric '{raw}': expected some of {}",
+                        known.join(", ")
+                    );
                 }
                 if !out.contains(&name) {
                     out.push(name);
@@ -276,7 +343,11 @@ fn requested_metrics(list: Option<&[String]>, have_depth: bool) -> anyhow::Resul
             }
             Ok(out)
         }
-        None => Ok(METRICS.iter().filter(|m| have_depth || !m.needs_depth).map(|m| m.name.to_string()).collect()),
+        None => Ok(METRICS
+            .iter()
+            .filter(|m| have_depth || !m.needs_depth)
+            .map(|m| m.name.to_string())
+            .collect()),
     }
 }
 
@@ -293,7 +364,10 @@ struct RegionValues {
 
 impl RegionValues {
     fn new() -> Self {
-        Self { values: Default::default(), error: Default::default() }
+        Self {
+            values: Default::default(),
+            error: Default::default(),
+        }
     }
 
     fn push(&mut self, region: RegionKind, name: &str, value: Result<f64, MetricError>) {
@@ -332,7 +406,12 @@ fn regions_for(
     let mut out = vec![(RegionKind::Full, Ok(Region::Full))];
     if let Some(mask) = mask {
         if mask.len() != width * height {
-            let err = || MetricError::MaskSize { got: mask.len(), expected: width * height, width, height };
+            let err = || MetricError::MaskSize {
+                got: mask.len(),
+                expected: width * height,
+                width,
+                height,
+            };
             out.push((RegionKind::BBox, Err(err())));
             out.push((RegionKind::Mask, Err(err())));
         } else {
@@ -391,7 +470,10 @@ fn run_ssim(ctx: &Ctx, report: &mut EvalReport) -> anyhow::Result<()> {
 /// LPIPS (ST-LPIPS by default, see `--lpips-net`) over the whole image and the mask's bounding
 /// box (a per-pixel mask does not apply to a network distance).
 fn run_lpips(ctx: &Ctx, report: &mut EvalReport) -> anyhow::Result<()> {
-    let keys: Vec<String> = active_regions(ctx, false).iter().map(|r| r.key("lpips")).collect();
+    let keys: Vec<String> = active_regions(ctx, false)
+        .iter()
+        .map(|r| r.key("lpips"))
+        .collect();
     let Some(path) = ctx.weights_file(ctx.lpips_net.weights_file(), report, &keys) else {
         return Ok(());
     };
@@ -404,19 +486,26 @@ fn run_lpips(ctx: &Ctx, report: &mut EvalReport) -> anyhow::Result<()> {
             return Ok(());
         }
     };
-    image_metric(ctx, report, "lpips", false, |p, g, region| model.distance(p, g, region))
+    image_metric(ctx, report, "lpips", false, |p, g, region| {
+        model.distance(p, g, region)
+    })
 }
 
 /// D-PSNR on the 8-bit renderings of the disparity maps (see `gb_eval::disparity`).
 fn run_d_psnr(ctx: &Ctx, report: &mut EvalReport) -> anyhow::Result<()> {
     if ctx.inputs.depth.is_none() {
-        report.set_unavailable("d_psnr", "no depth folders (pass --pred-depth and --gt-depth)");
+        report.set_unavailable(
+            "d_psnr",
+            "no depth folders (pass --pred-depth and --gt-depth)",
+        );
         return Ok(());
     }
     let pb = ctx.progress("d_psnr", ctx.inputs.len());
     let mut vals = RegionValues::new();
     for i in 0..ctx.inputs.len() {
-        let Some((pred, gt)) = ctx.inputs.load_disparity_pair(i)? else { break };
+        let Some((pred, gt)) = ctx.inputs.load_disparity_pair(i)? else {
+            break;
+        };
         let name = &ctx.inputs.names[i];
         for (kind, region) in regions_for(ctx.inputs.load_mask(i)?, pred.width, pred.height) {
             vals.push(kind, name, region.and_then(|r| d_psnr(&pred, &gt, &r)));
@@ -437,11 +526,16 @@ fn run_fid(ctx: &Ctx, report: &mut EvalReport) -> anyhow::Result<()> {
 /// D-FID: FID on the 8-bit renderings of the disparity maps (see `gb_eval::d_fid`).
 fn run_d_fid(ctx: &Ctx, report: &mut EvalReport) -> anyhow::Result<()> {
     if ctx.inputs.depth.is_none() {
-        report.set_unavailable("d_fid", "no depth folders (pass --pred-depth and --gt-depth)");
+        report.set_unavailable(
+            "d_fid",
+            "no depth folders (pass --pred-depth and --gt-depth)",
+        );
         return Ok(());
     }
     fid_metric(ctx, report, "d_fid", |i| {
-        let Some((pred, gt)) = ctx.inputs.load_disparity_pair(i)? else { return Ok(None) };
+        let Some((pred, gt)) = ctx.inputs.load_disparity_pair(i)? else {
+            return Ok(None);
+        };
         let name = &ctx.inputs.names[i];
         let render = |m| disparity_to_rgb8(m).with_context(|| format!("{name}: disparity map"));
         Ok(Some((render(&pred)?, render(&gt)?)))
@@ -460,7 +554,8 @@ fn fid_metric(
         report.set_unavailable(key, e.to_string());
         return Ok(());
     }
-    let Some(path) = ctx.weights_file(gb_eval::fid::WEIGHTS_FILE, report, &[key.to_string()]) else {
+    let Some(path) = ctx.weights_file(gb_eval::fid::WEIGHTS_FILE, report, &[key.to_string()])
+    else {
         return Ok(());
     };
     let extractor = match FidExtractor::load(&path, &ctx.device.device()) {
@@ -482,8 +577,18 @@ fn fid_metric(
     }
     pb.finish_and_clear();
     let dim = gb_eval::fid::FEATURE_DIM;
-    let pred_set = FeatureSet { values: &pred_feats, count, dim, name: "prediction" };
-    let gt_set = FeatureSet { values: &gt_feats, count, dim, name: "ground truth" };
+    let pred_set = FeatureSet {
+        values: &pred_feats,
+        count,
+        dim,
+        name: "prediction",
+    };
+    let gt_set = FeatureSet {
+        values: &gt_feats,
+        count,
+        dim,
+        name: "ground truth",
+    };
     match frechet_distance_features(pred_set, gt_set) {
         Ok(v) => report.set(key, v),
         Err(e) => report.set_unavailable(key, e.to_string()),
@@ -495,8 +600,12 @@ fn fid_metric(
 /// OpenCV's LIVE model from the weights folder (see `gb_eval::brisque`).
 fn run_brisque(ctx: &Ctx, report: &mut EvalReport) -> anyhow::Result<()> {
     let keys = ["brisque".to_string()];
-    let Some(model_path) = ctx.weights_file(brisque::OPENCV_MODEL_FILE, report, &keys) else { return Ok(()) };
-    let Some(range_path) = ctx.weights_file(brisque::OPENCV_RANGE_FILE, report, &keys) else { return Ok(()) };
+    let Some(model_path) = ctx.weights_file(brisque::OPENCV_MODEL_FILE, report, &keys) else {
+        return Ok(());
+    };
+    let Some(range_path) = ctx.weights_file(brisque::OPENCV_RANGE_FILE, report, &keys) else {
+        return Ok(());
+    };
     let model = match Brisque::load_opencv(&model_path, &range_path) {
         Ok(m) => m,
         Err(e) => {

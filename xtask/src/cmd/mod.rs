@@ -3,8 +3,13 @@
 pub mod bench;
 pub mod bench_eval;
 pub mod bench_nerf;
+pub mod bench_unet;
 pub mod devices;
+pub mod distill_bench;
+pub mod distill_image;
 pub mod eval;
 pub mod inpaint;
+pub mod inpaint_image;
+pub mod parity;
 pub mod scene;
 pub mod scene_info;

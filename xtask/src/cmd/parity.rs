@@ -22,9 +22,9 @@ use gb_diffusion::checkpoint::hub::{is_hub_id, resolve_cached};
 use gb_diffusion::checkpoint::{keymap, DiffusersFolder, WeightVariant};
 use gb_diffusion::clip::load_text_encoder;
 use gb_diffusion::lora::{apply_lora, LoraComponent, LoraFile};
-use gb_diffusion::tensor_file::{read_i64, write_tensors, TensorOut};
 use gb_diffusion::models::parity as image_parity;
 use gb_diffusion::models::{load_unet_variant, load_vae_variant};
+use gb_diffusion::tensor_file::{read_i64, write_tensors, TensorOut};
 use gb_diffusion::tokenizer::ClipTokenizer;
 
 /// The component to run.
@@ -145,7 +145,10 @@ fn run_tokenizer(
     let rows = tok.encode_batch(&prompts)?;
     let len = tok.special_tokens().max_length;
     let ids: Vec<i64> = rows.iter().flatten().map(|&i| i as i64).collect();
-    Ok(vec![("input_ids", TensorOut::I64(ids, vec![rows.len(), len]))])
+    Ok(vec![(
+        "input_ids",
+        TensorOut::I64(ids, vec![rows.len(), len]),
+    )])
 }
 
 fn run_text_encoder(
@@ -157,12 +160,20 @@ fn run_text_encoder(
 ) -> anyhow::Result<Vec<(&'static str, TensorOut)>> {
     let (ids, shape) = read_i64(inputs, "input_ids")?;
     if shape.len() != 2 {
-        bail!("{}: input_ids must be [batch, seq], got {shape:?}", inputs.display());
+        bail!(
+            "{}: input_ids must be [batch, seq], got {shape:?}",
+            inputs.display()
+        );
     }
     let rows: Vec<Vec<i64>> = ids.chunks(shape[1].max(1)).map(<[i64]>::to_vec).collect();
     let mut model = load_text_encoder(folder, variant, device)?;
     if let Some(lora) = lora {
-        let (m, n) = apply_lora(model, lora, LoraComponent::TextEncoder, &keymap::TEXT_ENCODER)?;
+        let (m, n) = apply_lora(
+            model,
+            lora,
+            LoraComponent::TextEncoder,
+            &keymap::TEXT_ENCODER,
+        )?;
         if n == 0 {
             bail!("{}: no text-encoder entries", lora.path.display());
         }
@@ -201,9 +212,15 @@ fn run_vae(
     let (vae, cfg) = load_vae_variant(root, variant, device)?;
     let vae = vae.valid();
     Ok(if encode {
-        vec![("mean", f32_out(image_parity::vae_encode(&vae, &cfg, inputs, device)?)?)]
+        vec![(
+            "mean",
+            f32_out(image_parity::vae_encode(&vae, &cfg, inputs, device)?)?,
+        )]
     } else {
-        vec![("image", f32_out(image_parity::vae_decode(&vae, &cfg, inputs, device)?)?)]
+        vec![(
+            "image",
+            f32_out(image_parity::vae_decode(&vae, &cfg, inputs, device)?)?,
+        )]
     })
 }
 
@@ -228,5 +245,8 @@ fn run_unet(
         unet = m;
     }
     let unet = unet.valid();
-    Ok(vec![("out", f32_out(image_parity::unet(&unet, &cfg, inputs, device)?)?)])
+    Ok(vec![(
+        "out",
+        f32_out(image_parity::unet(&unet, &cfg, inputs, device)?)?,
+    )])
 }

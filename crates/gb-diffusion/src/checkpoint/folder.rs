@@ -63,7 +63,11 @@ impl DiffusersFolder {
 
     /// Reads `<name>/config.json` (or another JSON file name, e.g. the scheduler's
     /// `scheduler_config.json`) into `T`.
-    pub fn config<T: DeserializeOwned>(&self, name: &str, file: &str) -> Result<T, CheckpointError> {
+    pub fn config<T: DeserializeOwned>(
+        &self,
+        name: &str,
+        file: &str,
+    ) -> Result<T, CheckpointError> {
         let path = self.component_dir(name)?.join(file);
         if !path.is_file() {
             return Err(CheckpointError::MissingFile {
@@ -144,8 +148,13 @@ mod tests {
         let folder = DiffusersFolder::open(dir.path()).unwrap();
         assert!(folder.index.is_none());
         let auto = folder.weight_files("unet", WeightVariant::Auto).unwrap();
-        assert_eq!(auto, vec![unet.join("diffusion_pytorch_model.fp16.safetensors")]);
-        let err = folder.weight_files("unet", WeightVariant::Full).unwrap_err();
+        assert_eq!(
+            auto,
+            vec![unet.join("diffusion_pytorch_model.fp16.safetensors")]
+        );
+        let err = folder
+            .weight_files("unet", WeightVariant::Full)
+            .unwrap_err();
         assert!(err.to_string().contains("unet"), "{err}");
         let err = folder.component_dir("vae").unwrap_err();
         assert!(err.to_string().contains("vae"), "{err}");

@@ -51,7 +51,10 @@ pub const VAE: KeymapSection = KeymapSection {
         (r"(mid_block\.attentions\.\d+)\.query\.", "${1}.to_q."),
         (r"(mid_block\.attentions\.\d+)\.key\.", "${1}.to_k."),
         (r"(mid_block\.attentions\.\d+)\.value\.", "${1}.to_v."),
-        (r"(mid_block\.attentions\.\d+)\.proj_attn\.", "${1}.to_out.0."),
+        (
+            r"(mid_block\.attentions\.\d+)\.proj_attn\.",
+            "${1}.to_out.0.",
+        ),
     ],
     ignored: &[],
     to_checkpoint: &[],
@@ -196,12 +199,30 @@ mod tests {
     #[test]
     fn vae_old_attention_names_map_to_new() {
         let cases = [
-            ("encoder.mid_block.attentions.0.query.weight", "encoder.mid_block.attentions.0.to_q.weight"),
-            ("decoder.mid_block.attentions.0.key.bias", "decoder.mid_block.attentions.0.to_k.bias"),
-            ("encoder.mid_block.attentions.0.value.weight", "encoder.mid_block.attentions.0.to_v.weight"),
-            ("decoder.mid_block.attentions.0.proj_attn.weight", "decoder.mid_block.attentions.0.to_out.0.weight"),
-            ("decoder.mid_block.attentions.0.to_q.weight", "decoder.mid_block.attentions.0.to_q.weight"),
-            ("encoder.down_blocks.0.resnets.0.conv1.weight", "encoder.down_blocks.0.resnets.0.conv1.weight"),
+            (
+                "encoder.mid_block.attentions.0.query.weight",
+                "encoder.mid_block.attentions.0.to_q.weight",
+            ),
+            (
+                "decoder.mid_block.attentions.0.key.bias",
+                "decoder.mid_block.attentions.0.to_k.bias",
+            ),
+            (
+                "encoder.mid_block.attentions.0.value.weight",
+                "encoder.mid_block.attentions.0.to_v.weight",
+            ),
+            (
+                "decoder.mid_block.attentions.0.proj_attn.weight",
+                "decoder.mid_block.attentions.0.to_out.0.weight",
+            ),
+            (
+                "decoder.mid_block.attentions.0.to_q.weight",
+                "decoder.mid_block.attentions.0.to_q.weight",
+            ),
+            (
+                "encoder.down_blocks.0.resnets.0.conv1.weight",
+                "encoder.down_blocks.0.resnets.0.conv1.weight",
+            ),
         ];
         for (from, to) in cases {
             assert_eq!(VAE.map_key(from).unwrap(), to);
@@ -215,7 +236,10 @@ mod tests {
         assert_eq!(UNET.map_key(k).unwrap(), want);
         assert_eq!(UNET_LINEAR_PROJECTION.map_key(k).unwrap(), want);
         let k = "mid_block.attentions.0.transformer_blocks.0.ff.net.2.bias";
-        assert_eq!(UNET.map_key(k).unwrap(), "mid_block.attentions.0.transformer_blocks.0.ff.net_2.bias");
+        assert_eq!(
+            UNET.map_key(k).unwrap(),
+            "mid_block.attentions.0.transformer_blocks.0.ff.net_2.bias"
+        );
         let k = "up_blocks.1.attentions.2.proj_in.weight";
         assert_eq!(UNET.map_key(k).unwrap(), k);
         assert_eq!(

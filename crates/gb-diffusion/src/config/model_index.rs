@@ -75,7 +75,14 @@ mod tests {
         assert!(m.component("requires_safety_checker").is_none());
         assert_eq!(
             m.component_names(),
-            vec!["feature_extractor", "scheduler", "text_encoder", "tokenizer", "unet", "vae"]
+            vec![
+                "feature_extractor",
+                "scheduler",
+                "text_encoder",
+                "tokenizer",
+                "unet",
+                "vae"
+            ]
         );
     }
 }

@@ -123,7 +123,9 @@ impl ViewConditioning {
         if resolution == 0 || resolution % f != 0 {
             return Err(DistillError::Config {
                 field: "resolution",
-                message: format!("{resolution} is not a positive multiple of the encoder's factor {f}"),
+                message: format!(
+                    "{resolution} is not a positive multiple of the encoder's factor {f}"
+                ),
             });
         }
         let host: Vec<f32> = mask

@@ -70,7 +70,12 @@ pub fn mask_bbox(
 /// Crops `image` (`[B, C, H, W]`) to `bbox` and resizes it to `resolution x resolution`
 /// (bilinear with half-pixel centres, like `F.interpolate(align_corners=False)`, or nearest
 /// for masks). Differentiable; an identity resize is skipped.
-pub fn crop_resize(image: Tensor<4>, bbox: &MaskBox, resolution: usize, nearest: bool) -> Tensor<4> {
+pub fn crop_resize(
+    image: Tensor<4>,
+    bbox: &MaskBox,
+    resolution: usize,
+    nearest: bool,
+) -> Tensor<4> {
     let [b, c, _, _] = image.dims();
     let crop = image.slice([
         0..b,

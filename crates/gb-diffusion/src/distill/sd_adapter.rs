@@ -110,7 +110,10 @@ impl LatentEncoder for SdVaeEncoder {
         } else {
             image.autodiff()
         };
-        Ok(self.vae.encode_mean(image).mul_scalar(self.vae.scaling_factor))
+        Ok(self
+            .vae
+            .encode_mean(image)
+            .mul_scalar(self.vae.scaling_factor))
     }
 
     fn downsample_factor(&self) -> usize {

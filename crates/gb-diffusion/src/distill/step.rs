@@ -218,7 +218,8 @@ impl ScoreDistiller {
         let z = target.latents.clone().inner();
         let mask = target.mask_latent.clone().inner();
         let masked_latents = target.masked_image_latents.clone().inner();
-        let noisy = z.mul_scalar(alpha_bar.sqrt()) + noise.clone().mul_scalar((1.0 - alpha_bar).sqrt());
+        let noisy =
+            z.mul_scalar(alpha_bar.sqrt()) + noise.clone().mul_scalar((1.0 - alpha_bar).sqrt());
 
         let branches = self.guidance.branches();
         let mut texts = Vec::with_capacity(branches.len());
@@ -245,7 +246,8 @@ impl ScoreDistiller {
         let unet_batch = batch.batch_size();
         let eps = unet.predict_eps(batch)?;
         check_shape("predicted eps", &eps.dims(), &[rows * b, c, h, w])?;
-        let per_branch: Vec<Tensor<4>> = (0..rows).map(|i| eps.clone().narrow(0, i * b, b)).collect();
+        let per_branch: Vec<Tensor<4>> =
+            (0..rows).map(|i| eps.clone().narrow(0, i * b, b)).collect();
 
         let direction = self.guidance.direction(&per_branch, &noise);
         let weighted = direction.mul_scalar(w_t);
@@ -296,7 +298,11 @@ fn expand_batch(emb: Tensor<3>, b: usize) -> Result<Tensor<3>, DistillError> {
     }
 }
 
-fn check_shape(tensor: &'static str, actual: &[usize], expected: &[usize]) -> Result<(), DistillError> {
+fn check_shape(
+    tensor: &'static str,
+    actual: &[usize],
+    expected: &[usize],
+) -> Result<(), DistillError> {
     if actual == expected {
         Ok(())
     } else {

@@ -87,7 +87,12 @@ impl TimestepConfig {
 
     /// The timestep index of step `iteration` (uses `rng` for the uniform schedule) for a
     /// schedule of `num_train_timesteps`. Call [`TimestepConfig::validate`] first.
-    pub fn sample(&self, iteration: usize, num_train_timesteps: usize, rng: &mut impl Rng) -> usize {
+    pub fn sample(
+        &self,
+        iteration: usize,
+        num_train_timesteps: usize,
+        rng: &mut impl Rng,
+    ) -> usize {
         let n = num_train_timesteps as f64;
         let (lo, hi) = index_range(self.t_min, self.t_max, num_train_timesteps);
         match self.schedule {

@@ -55,7 +55,9 @@ pub fn distill_view(
     prompts: &PromptEmbeddings,
 ) -> Result<DistillOutput, DistillError> {
     let image = prior_image(render, view, view_index, mode)?;
-    let latents = models.encoder.encode(image.mul_scalar(2.0).sub_scalar(1.0))?;
+    let latents = models
+        .encoder
+        .encode(image.mul_scalar(2.0).sub_scalar(1.0))?;
     distiller.step(
         models.unet,
         LatentTarget {

@@ -92,8 +92,7 @@ impl LoraFile {
             message,
         };
         let bytes = std::fs::read(path).map_err(|e| file_err(e.to_string()))?;
-        let (_, meta) =
-            SafeTensors::read_metadata(&bytes).map_err(|e| file_err(e.to_string()))?;
+        let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| file_err(e.to_string()))?;
         let settings = peft_settings(meta.metadata().as_ref(), path)?;
         let st = SafeTensors::deserialize(&bytes).map_err(|e| file_err(e.to_string()))?;
         let mut partials: BTreeMap<(LoraComponent, String, bool), Partial> = BTreeMap::new();
@@ -168,7 +167,9 @@ impl LoraFile {
 
     /// The entries for one component.
     pub fn entries_for(&self, component: LoraComponent) -> impl Iterator<Item = &LoraEntry> {
-        self.entries.iter().filter(move |e| e.component == component)
+        self.entries
+            .iter()
+            .filter(move |e| e.component == component)
     }
 }
 
@@ -290,7 +291,9 @@ mod tests {
     fn key_forms_resolve_to_modules() {
         let te = LoraComponent::TextEncoder;
         assert_eq!(
-            split_role("encoder.layers.0.self_attn.q_proj.lora_A.weight").unwrap().0,
+            split_role("encoder.layers.0.self_attn.q_proj.lora_A.weight")
+                .unwrap()
+                .0,
             "encoder.layers.0.self_attn.q_proj"
         );
         assert!(matches!(
@@ -311,6 +314,9 @@ mod tests {
             "down_blocks.0.attentions.0.transformer_blocks.0.attn1.to_out.0"
         );
         let (c, kohya, rest) = split_component("lora_te_text_model_encoder_layers_0_mlp_fc1.alpha");
-        assert_eq!((c, kohya, rest), (te, true, "text_model_encoder_layers_0_mlp_fc1.alpha"));
+        assert_eq!(
+            (c, kohya, rest),
+            (te, true, "text_model_encoder_layers_0_mlp_fc1.alpha")
+        );
     }
 }

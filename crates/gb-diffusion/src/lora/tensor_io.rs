@@ -44,9 +44,7 @@ pub fn view_to_f32(view: &TensorView<'_>) -> Option<Vec<f32>> {
             .collect(),
         Dtype::F64 => bytes
             .chunks_exact(8)
-            .map(|c| {
-                f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f32
-            })
+            .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f32)
             .collect(),
         _ => return None,
     };

@@ -64,10 +64,13 @@ pub fn collect_lora<M: Module>(module: &M) -> Result<Vec<CollectedLora>, LoraErr
             path: name.clone().into(),
             message: format!("cannot read adapter tensor: {e:?}"),
         })?;
-        let values = data.convert::<f32>().to_vec::<f32>().map_err(|e| LoraError::File {
-            path: name.clone().into(),
-            message: format!("cannot read adapter tensor: {e:?}"),
-        })?;
+        let values = data
+            .convert::<f32>()
+            .to_vec::<f32>()
+            .map_err(|e| LoraError::File {
+                path: name.clone().into(),
+                message: format!("cannot read adapter tensor: {e:?}"),
+            })?;
         tensors.insert(name, (values, shape));
     }
     let mut out = Vec::new();
@@ -212,12 +215,13 @@ pub fn write_peft_lora(path: &Path, exports: &[LoraExport<'_>]) -> Result<(), Lo
         .collect::<Result<_, _>>()?;
     let mut metadata = std::collections::HashMap::new();
     metadata.insert("format".to_string(), "pt".to_string());
-    let meta_json = serde_json::to_string_pretty(&serde_json::Value::Object(meta)).map_err(|e| {
-        LoraError::File {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        }
-    })?;
+    let meta_json =
+        serde_json::to_string_pretty(&serde_json::Value::Object(meta)).map_err(|e| {
+            LoraError::File {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            }
+        })?;
     metadata.insert("lora_adapter_metadata".to_string(), meta_json);
     let bytes = safetensors::serialize(views, Some(metadata)).map_err(|e| LoraError::File {
         path: path.to_path_buf(),

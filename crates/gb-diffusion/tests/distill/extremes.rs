@@ -13,8 +13,16 @@ use crate::support::{host, max_abs, tensor, LinearPoolEncoder, MockUnet, LATENT_
 fn all_methods(w: f32) -> Vec<GuidanceMethod> {
     vec![
         GuidanceMethod::Sds { guidance_scale: w },
-        GuidanceMethod::Csd { w1: w, w2: w - 1.0, w3: None },
-        GuidanceMethod::Csd { w1: w, w2: w, w3: Some(w) },
+        GuidanceMethod::Csd {
+            w1: w,
+            w2: w - 1.0,
+            w3: None,
+        },
+        GuidanceMethod::Csd {
+            w1: w,
+            w2: w,
+            w3: Some(w),
+        },
         GuidanceMethod::Bsd { w1: w, w2: w - 1.0 },
     ]
 }
@@ -35,13 +43,21 @@ fn t_at_the_ends_of_the_paper_range_is_finite() {
     let scene = Scene::new(&device, half_mask(), None);
     let encoder = LinearPoolEncoder::new(&device);
     for method in all_methods(7.5) {
-        let settings = DistillSettings { guidance: method.clone(), ..DistillSettings::paper_rgb() };
+        let settings = DistillSettings {
+            guidance: method.clone(),
+            ..DistillSettings::paper_rgb()
+        };
         let mut d = ScoreDistiller::new(&settings, sd_alphas(), 0).expect("distiller");
         for (t, index) in [(0.02, 20), (0.98, 980)] {
-            let out = d.step_at(&MockUnet::default(), target(&scene, &encoder), t).expect("step");
+            let out = d
+                .step_at(&MockUnet::default(), target(&scene, &encoder), t)
+                .expect("step");
             assert_eq!(out.diagnostics.timestep, index);
             let g = host(out.gradient);
-            assert!(g.iter().all(|v| v.is_finite()) && max_abs(&g) > 0.0, "{method:?} t={t}");
+            assert!(
+                g.iter().all(|v| v.is_finite()) && max_abs(&g) > 0.0,
+                "{method:?} t={t}"
+            );
         }
     }
 }
@@ -51,22 +67,38 @@ fn t_zero_and_one_are_rejected_clearly() {
     let device = BackendKind::Flex.device();
     let scene = Scene::new(&device, half_mask(), None);
     let encoder = LinearPoolEncoder::new(&device);
-    let mut d = ScoreDistiller::new(&DistillSettings::paper_rgb(), sd_alphas(), 0).expect("distiller");
+    let mut d =
+        ScoreDistiller::new(&DistillSettings::paper_rgb(), sd_alphas(), 0).expect("distiller");
     for t in [0.0, 1.0, -0.5, f64::NAN] {
-        let err = d.step_at(&MockUnet::default(), target(&scene, &encoder), t).unwrap_err();
-        assert!(matches!(err, DistillError::TimestepOutOfRange { field: "t", .. }), "{err}");
+        let err = d
+            .step_at(&MockUnet::default(), target(&scene, &encoder), t)
+            .unwrap_err();
+        assert!(
+            matches!(err, DistillError::TimestepOutOfRange { field: "t", .. }),
+            "{err}"
+        );
         assert!(err.to_string().contains("outside (0, 1)"), "{err}");
     }
     for (t_min, t_max, field) in [(0.0, 0.98, "t_min"), (0.02, 1.0, "t_max")] {
         let settings = DistillSettings {
-            timesteps: TimestepConfig { t_min, t_max, ..TimestepConfig::default() },
+            timesteps: TimestepConfig {
+                t_min,
+                t_max,
+                ..TimestepConfig::default()
+            },
             ..DistillSettings::paper_rgb()
         };
-        let err = ScoreDistiller::new(&settings, sd_alphas(), 0).err().expect("rejected");
+        let err = ScoreDistiller::new(&settings, sd_alphas(), 0)
+            .err()
+            .expect("rejected");
         assert!(err.to_string().contains(field), "{err}");
     }
     let settings = DistillSettings {
-        timesteps: TimestepConfig { t_min: 0.9, t_max: 0.1, ..TimestepConfig::default() },
+        timesteps: TimestepConfig {
+            t_min: 0.9,
+            t_max: 0.1,
+            ..TimestepConfig::default()
+        },
         ..DistillSettings::paper_rgb()
     };
     assert!(matches!(
@@ -77,8 +109,13 @@ fn t_zero_and_one_are_rejected_clearly() {
     let d = Scene::distiller(GuidanceMethod::paper_rgb(), Weighting::OneMinusAlphaBar);
     for index in [0, 1000] {
         let noise = tensor(scene.noise.clone(), [1, LATENT_C, LH, LW], &device);
-        let err = d.step_with(&MockUnet::default(), target(&scene, &encoder), index, noise).unwrap_err();
-        assert!(matches!(err, DistillError::TimestepOutOfRange { .. }), "{err}");
+        let err = d
+            .step_with(&MockUnet::default(), target(&scene, &encoder), index, noise)
+            .unwrap_err();
+        assert!(
+            matches!(err, DistillError::TimestepOutOfRange { .. }),
+            "{err}"
+        );
     }
 }
 
@@ -93,12 +130,24 @@ fn weights_up_to_100_stay_finite_and_scale_linearly() {
             let (out, image_grad) = scene.run(&d, &MockUnet::default(), &encoder, timestep);
             let g = host(out.gradient);
             let expected = scene.expected(&method, timestep, Weighting::Constant);
-            assert!(g.iter().chain(&image_grad).all(|v| v.is_finite()), "{method:?}");
+            assert!(
+                g.iter().chain(&image_grad).all(|v| v.is_finite()),
+                "{method:?}"
+            );
             let err = crate::support::max_abs_diff(&g, &expected);
-            assert!(err <= 1e-5 * max_abs(&expected).max(1.0), "{method:?} t={timestep}: {err}");
+            assert!(
+                err <= 1e-5 * max_abs(&expected).max(1.0),
+                "{method:?} t={timestep}: {err}"
+            );
         }
     }
-    let bad = GuidanceMethod::Bsd { w1: f32::INFINITY, w2: 1.0 }.build().err().expect("rejected");
+    let bad = GuidanceMethod::Bsd {
+        w1: f32::INFINITY,
+        w2: 1.0,
+    }
+    .build()
+    .err()
+    .expect("rejected");
     assert!(bad.to_string().contains("w1"), "{bad}");
 }
 
@@ -110,7 +159,10 @@ fn all_zero_and_full_masks() {
         let zero = Scene::new(&device, vec![0.0; LH * LW], None);
         let d = Scene::distiller(method.clone(), Weighting::OneMinusAlphaBar);
         let (out, image_grad) = zero.run(&d, &MockUnet::default(), &encoder, TIMESTEP);
-        assert!(host(out.gradient).iter().chain(&image_grad).all(|v| *v == 0.0));
+        assert!(host(out.gradient)
+            .iter()
+            .chain(&image_grad)
+            .all(|v| *v == 0.0));
         assert_eq!(out.diagnostics.grad_norm, 0.0);
 
         let full = Scene::new(&device, vec![1.0; LH * LW], None);
@@ -156,7 +208,9 @@ fn constant_image_gives_finite_gradients() {
             let expected = scene.expected(&method, TIMESTEP, Weighting::OneMinusAlphaBar);
             let g = host(out.gradient);
             assert!(image_grad.iter().all(|v| v.is_finite()));
-            assert!(crate::support::max_abs_diff(&g, &expected) <= 1e-5 * max_abs(&expected).max(1.0));
+            assert!(
+                crate::support::max_abs_diff(&g, &expected) <= 1e-5 * max_abs(&expected).max(1.0)
+            );
         }
     }
 }
@@ -166,7 +220,10 @@ fn nan_is_zeroed_and_clamp_bounds_the_gradient() {
     let device = BackendKind::Flex.device();
     let scene = Scene::new(&device, vec![1.0; LH * LW], None);
     let encoder = LinearPoolEncoder::new(&device);
-    let unet = MockUnet { nan_above: Some(0.5), ..MockUnet::default() };
+    let unet = MockUnet {
+        nan_above: Some(0.5),
+        ..MockUnet::default()
+    };
     let d = Scene::distiller(GuidanceMethod::paper_rgb(), Weighting::OneMinusAlphaBar);
     let (out, image_grad) = scene.run(&d, &unet, &encoder, TIMESTEP);
     let g = host(out.gradient);
@@ -176,7 +233,9 @@ fn nan_is_zeroed_and_clamp_bounds_the_gradient() {
     assert!(g.iter().chain(&image_grad).all(|v| v.is_finite()));
 
     let settings = DistillSettings {
-        guidance: GuidanceMethod::Sds { guidance_scale: 100.0 },
+        guidance: GuidanceMethod::Sds {
+            guidance_scale: 100.0,
+        },
         grad_clamp: Some(0.05),
         ..DistillSettings::paper_rgb()
     };
@@ -185,8 +244,14 @@ fn nan_is_zeroed_and_clamp_bounds_the_gradient() {
     let g = host(out.gradient);
     assert!(max_abs(&g) <= 0.05 && max_abs(&g) > 0.049);
     for bad in [0.0, -1.0] {
-        let settings = DistillSettings { grad_clamp: Some(bad), ..DistillSettings::paper_rgb() };
-        assert!(matches!(ScoreDistiller::new(&settings, sd_alphas(), 0), Err(DistillError::BadClamp(_))));
+        let settings = DistillSettings {
+            grad_clamp: Some(bad),
+            ..DistillSettings::paper_rgb()
+        };
+        assert!(matches!(
+            ScoreDistiller::new(&settings, sd_alphas(), 0),
+            Err(DistillError::BadClamp(_))
+        ));
     }
 }
 
@@ -198,6 +263,16 @@ fn a_missing_embedding_is_a_clear_error() {
     let encoder = LinearPoolEncoder::new(&device);
     let d = Scene::distiller(GuidanceMethod::paper_rgb(), Weighting::OneMinusAlphaBar);
     let noise = tensor(scene.noise.clone(), [1, LATENT_C, LH, LW], &device);
-    let err = d.step_with(&MockUnet::default(), target(&scene, &encoder), TIMESTEP, noise).unwrap_err();
-    assert!(err.to_string().contains("bsd") && err.to_string().contains("Negative"), "{err}");
+    let err = d
+        .step_with(
+            &MockUnet::default(),
+            target(&scene, &encoder),
+            TIMESTEP,
+            noise,
+        )
+        .unwrap_err();
+    assert!(
+        err.to_string().contains("bsd") && err.to_string().contains("Negative"),
+        "{err}"
+    );
 }

@@ -14,14 +14,21 @@ fn encoder_gradient_matches_finite_differences() {
     let device = BackendKind::Flex.device();
     let ad = device.clone().autodiff();
     let (w, h, res) = (12, 10, 8);
-    let bbox = MaskBox { x0: 2, y0: 1, width: 7, height: 6 };
+    let bbox = MaskBox {
+        x0: 2,
+        y0: 1,
+        width: 7,
+        height: 6,
+    };
     let encoder = ConvEncoder::new(&device, 5);
     let g = randn(9, LATENT_C * (res / 2) * (res / 2));
     let image = rand01(8, 3 * w * h);
 
     // Analytic: backward of (encode(2 * crop_resize(x) - 1) * g).sum().
     let forward = |x: Tensor<4>| {
-        let prior = crop_resize(x, &bbox, res, false).mul_scalar(2.0).sub_scalar(1.0);
+        let prior = crop_resize(x, &bbox, res, false)
+            .mul_scalar(2.0)
+            .sub_scalar(1.0);
         encoder.encode(prior).expect("encode")
     };
     let x = tensor(image.clone(), [1, 3, h, w], &ad).require_grad();
@@ -53,7 +60,10 @@ fn encoder_gradient_matches_finite_differences() {
             inside += 1;
         }
     }
-    assert!(checked > 40 && inside > 10, "checked {checked}, non-trivial {inside}");
+    assert!(
+        checked > 40 && inside > 10,
+        "checked {checked}, non-trivial {inside}"
+    );
     // Pixels outside the box get exactly no gradient.
     assert_eq!(analytic[0], 0.0);
 }

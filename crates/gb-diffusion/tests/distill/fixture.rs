@@ -21,7 +21,9 @@ pub fn sd_alphas() -> AlphasCumprod {
 
 /// Latent mask: the left half of the latent columns.
 pub fn half_mask() -> Vec<f32> {
-    (0..LH * LW).map(|i| if i % LW < LW / 2 { 1.0 } else { 0.0 }).collect()
+    (0..LH * LW)
+        .map(|i| if i % LW < LW / 2 { 1.0 } else { 0.0 })
+        .collect()
 }
 
 pub struct Scene {
@@ -93,7 +95,12 @@ impl Scene {
     }
 
     /// The closed-form latent gradient of `method` at `timestep` for the linear encoder.
-    pub fn expected(&self, method: &GuidanceMethod, timestep: usize, weighting: Weighting) -> Vec<f32> {
+    pub fn expected(
+        &self,
+        method: &GuidanceMethod,
+        timestep: usize,
+        weighting: Weighting,
+    ) -> Vec<f32> {
         let latents = LinearPoolEncoder::new(&self.device)
             .encode(self.image.clone().inner())
             .expect("encode");
@@ -104,7 +111,8 @@ impl Scene {
             .zip(&self.noise)
             .map(|(z, n)| (ab.sqrt() as f32) * z + ((1.0 - ab).sqrt() as f32) * n)
             .collect();
-        let eps = |m: f32| crate::support::mock_eps_host(&x_t, m, &self.mask, &self.masked, LH * LW);
+        let eps =
+            |m: f32| crate::support::mock_eps_host(&x_t, m, &self.mask, &self.masked, LH * LW);
         let (et, eu, en) = (eps(self.means[0]), eps(self.means[1]), eps(self.means[2]));
         let w = match weighting {
             Weighting::OneMinusAlphaBar => (1.0 - ab) as f32,
@@ -113,7 +121,9 @@ impl Scene {
         (0..x_t.len())
             .map(|i| {
                 let dir = match *method {
-                    GuidanceMethod::Sds { guidance_scale: s } => eu[i] + s * (et[i] - eu[i]) - self.noise[i],
+                    GuidanceMethod::Sds { guidance_scale: s } => {
+                        eu[i] + s * (et[i] - eu[i]) - self.noise[i]
+                    }
                     GuidanceMethod::Csd { w1, w2, w3 } => {
                         w1 * et[i] + w3.unwrap_or(w2 - w1) * eu[i] - w2 * en[i]
                     }

@@ -8,10 +8,22 @@ use crate::support::{host, max_abs, max_abs_diff, LinearPoolEncoder, MockUnet};
 
 fn methods() -> Vec<GuidanceMethod> {
     vec![
-        GuidanceMethod::Sds { guidance_scale: 7.5 },
-        GuidanceMethod::Sds { guidance_scale: 1.0 },
-        GuidanceMethod::Csd { w1: 7.5, w2: 6.5, w3: None },
-        GuidanceMethod::Csd { w1: 7.5, w2: 6.5, w3: Some(2.5) },
+        GuidanceMethod::Sds {
+            guidance_scale: 7.5,
+        },
+        GuidanceMethod::Sds {
+            guidance_scale: 1.0,
+        },
+        GuidanceMethod::Csd {
+            w1: 7.5,
+            w2: 6.5,
+            w3: None,
+        },
+        GuidanceMethod::Csd {
+            w1: 7.5,
+            w2: 6.5,
+            w3: Some(2.5),
+        },
         GuidanceMethod::Bsd { w1: 7.5, w2: 6.5 },
         GuidanceMethod::Bsd { w1: 1.5, w2: 0.5 },
     ]
@@ -32,7 +44,10 @@ fn gradient_reaching_the_image_equals_each_formula() {
             let scale = max_abs(&expected);
             assert!(scale > 0.1, "{method:?}: degenerate expectation");
             let err = max_abs_diff(&g, &expected);
-            assert!(err <= 1e-5 * scale.max(1.0), "{method:?} {weighting:?}: latent grad err {err}");
+            assert!(
+                err <= 1e-5 * scale.max(1.0),
+                "{method:?} {weighting:?}: latent grad err {err}"
+            );
             let expected_image = LinearPoolEncoder::transpose_host(&expected, H, W);
             let err = max_abs_diff(&image_grad, &expected_image);
             assert!(
@@ -40,9 +55,17 @@ fn gradient_reaching_the_image_equals_each_formula() {
                 "{method:?} {weighting:?}: image grad err {err}"
             );
             let ab = crate::fixture::sd_alphas().at(TIMESTEP);
-            let w = if weighting == Weighting::Constant { 1.0 } else { 1.0 - ab };
+            let w = if weighting == Weighting::Constant {
+                1.0
+            } else {
+                1.0 - ab
+            };
             assert!((out.diagnostics.weight - w).abs() < 1e-12);
-            let norm = expected.iter().map(|v| (*v as f64).powi(2)).sum::<f64>().sqrt();
+            let norm = expected
+                .iter()
+                .map(|v| (*v as f64).powi(2))
+                .sum::<f64>()
+                .sqrt();
             assert!((out.diagnostics.grad_norm - norm).abs() <= 1e-4 * norm);
         }
     }
@@ -59,13 +82,21 @@ fn csd_with_w3_zero_is_exactly_bsd() {
         let (out, image_grad) = scene.run(&d, &unet, &encoder, TIMESTEP);
         (host(out.gradient), image_grad)
     };
-    let (csd_g, csd_img) = run(GuidanceMethod::Csd { w1: 7.5, w2: 6.5, w3: Some(0.0) });
+    let (csd_g, csd_img) = run(GuidanceMethod::Csd {
+        w1: 7.5,
+        w2: 6.5,
+        w3: Some(0.0),
+    });
     let (bsd_g, bsd_img) = run(GuidanceMethod::Bsd { w1: 7.5, w2: 6.5 });
     assert!(max_abs(&bsd_g) > 0.1);
     assert_eq!(csd_g, bsd_g, "latent gradients differ");
     assert_eq!(csd_img, bsd_img, "image gradients differ");
     // The default w3 = w2 - w1 = -1 is not BSD.
-    let (csd_default, _) = run(GuidanceMethod::Csd { w1: 7.5, w2: 6.5, w3: None });
+    let (csd_default, _) = run(GuidanceMethod::Csd {
+        w1: 7.5,
+        w2: 6.5,
+        w3: None,
+    });
     assert!(max_abs_diff(&csd_default, &bsd_g) > 1e-3);
 }
 
@@ -75,8 +106,20 @@ fn one_batched_unet_call_per_step() {
     let scene = Scene::new(&device, half_mask(), None);
     let encoder = LinearPoolEncoder::new(&device);
     for (method, batch) in [
-        (GuidanceMethod::Sds { guidance_scale: 7.5 }, 2),
-        (GuidanceMethod::Csd { w1: 7.5, w2: 6.5, w3: None }, 3),
+        (
+            GuidanceMethod::Sds {
+                guidance_scale: 7.5,
+            },
+            2,
+        ),
+        (
+            GuidanceMethod::Csd {
+                w1: 7.5,
+                w2: 6.5,
+                w3: None,
+            },
+            3,
+        ),
         (GuidanceMethod::Bsd { w1: 7.5, w2: 6.5 }, 2),
     ] {
         let unet = MockUnet::default();

@@ -7,7 +7,9 @@ use gb_diffusion::distill::{
 };
 
 use crate::fixture::{half_mask, sd_alphas, Scene, LH, LW, TIMESTEP};
-use crate::support::{host, max_abs, rand01, randn, tensor, ConvEncoder, LinearPoolEncoder, MockUnet};
+use crate::support::{
+    host, max_abs, rand01, randn, tensor, ConvEncoder, LinearPoolEncoder, MockUnet,
+};
 
 #[test]
 fn latent_gradient_is_zero_outside_the_latent_mask() {
@@ -15,8 +17,14 @@ fn latent_gradient_is_zero_outside_the_latent_mask() {
     let scene = Scene::new(&device, half_mask(), None);
     let encoder = LinearPoolEncoder::new(&device);
     for method in [
-        GuidanceMethod::Sds { guidance_scale: 100.0 },
-        GuidanceMethod::Csd { w1: 7.5, w2: 6.5, w3: None },
+        GuidanceMethod::Sds {
+            guidance_scale: 100.0,
+        },
+        GuidanceMethod::Csd {
+            w1: 7.5,
+            w2: 6.5,
+            w3: None,
+        },
         GuidanceMethod::Bsd { w1: 7.5, w2: 6.5 },
     ] {
         let d = Scene::distiller(method, Weighting::OneMinusAlphaBar);
@@ -53,16 +61,33 @@ fn render_gradient_is_zero_outside_the_pixel_mask_when_pasted() {
     }
     let encoder = ConvEncoder::new(&device, 11);
     let gt = tensor(rand01(21, 3 * w * h), [1, 3, h, w], &device);
-    let view = ViewConditioning::new(0, &encoder, gt, tensor(mask.clone(), [1, 1, h, w], &device), 8)
-        .expect("view");
-    assert_eq!((view.bbox.x0, view.bbox.y0, view.bbox.width, view.bbox.height), (5, 3, 6, 5));
+    let view = ViewConditioning::new(
+        0,
+        &encoder,
+        gt,
+        tensor(mask.clone(), [1, 1, h, w], &device),
+        8,
+    )
+    .expect("view");
+    assert_eq!(
+        (
+            view.bbox.x0,
+            view.bbox.y0,
+            view.bbox.width,
+            view.bbox.height
+        ),
+        (5, 3, 6, 5)
+    );
     let prompts = PromptEmbeddings {
         text: tensor(randn(4, 12), [1, 3, 4], &device),
         unconditional: Some(tensor(randn(5, 12), [1, 3, 4], &device)),
         negative: Some(tensor(randn(6, 12), [1, 3, 4], &device)),
     };
     let unet = MockUnet::default();
-    let models = PriorModels { unet: &unet, encoder: &encoder };
+    let models = PriorModels {
+        unet: &unet,
+        encoder: &encoder,
+    };
     let settings = DistillSettings {
         guidance: GuidanceMethod::Bsd { w1: 7.5, w2: 6.5 },
         timesteps: TimestepConfig::default(),

@@ -16,7 +16,9 @@ use gb_diffusion::models::load_vae;
 use crate::support::{host, rand01, randn, tensor};
 
 fn fixture(path: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sd_image").join(path)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/sd_image")
+        .join(path)
 }
 
 #[test]
@@ -36,9 +38,17 @@ fn vae_encoder_gradient_matches_finite_differences() {
     let latents = encoder.encode(x.clone()).expect("encode");
     assert_eq!(latents.dims(), [1, 4, lat, lat]);
     let g_t = tensor(g.clone(), [1, 4, lat, lat], &device);
-    let analytic = host(x.grad(&surrogate_loss(&latents, &g_t).backward()).expect("grad"));
+    let analytic = host(
+        x.grad(&surrogate_loss(&latents, &g_t).backward())
+            .expect("grad"),
+    );
     let loss = |values: Vec<f32>| -> f64 {
-        let z = host(encoder.encode(tensor(values, [1, 3, size, size], &ad)).expect("encode").inner());
+        let z = host(
+            encoder
+                .encode(tensor(values, [1, 3, size, size], &ad))
+                .expect("encode")
+                .inner(),
+        );
         z.iter().zip(&g).map(|(a, b)| *a as f64 * *b as f64).sum()
     };
     let eps = 1e-2f32;
@@ -72,28 +82,74 @@ fn one_step_of_each_method_on_the_tiny_inpainting_prior() {
         .map(|(c, i)| img.data[i * 3 + c])
         .collect();
     let gt = tensor(chw.clone(), [1, 3, h, w], &device);
-    let binary: Vec<f32> = mask.iter().map(|v| if *v >= 0.5 { 1.0 } else { 0.0 }).collect();
-    let view = ViewConditioning::new(0, &prior.encoder, gt, tensor(binary.clone(), [1, 1, h, w], &device), 32)
-        .expect("view");
+    let binary: Vec<f32> = mask
+        .iter()
+        .map(|v| if *v >= 0.5 { 1.0 } else { 0.0 })
+        .collect();
+    let view = ViewConditioning::new(
+        0,
+        &prior.encoder,
+        gt,
+        tensor(binary.clone(), [1, 1, h, w], &device),
+        32,
+    )
+    .expect("view");
     assert_eq!(view.masked_image_latents.dims(), [1, 4, 8, 8]);
-    let models = PriorModels { unet: &prior.unet, encoder: &prior.encoder };
+    let models = PriorModels {
+        unet: &prior.unet,
+        encoder: &prior.encoder,
+    };
     let mut cache = PromptCache::new();
     for (method, batch) in [
-        (GuidanceMethod::Sds { guidance_scale: 7.5 }, 2),
-        (GuidanceMethod::Csd { w1: 7.5, w2: 6.5, w3: None }, 3),
+        (
+            GuidanceMethod::Sds {
+                guidance_scale: 7.5,
+            },
+            2,
+        ),
+        (
+            GuidanceMethod::Csd {
+                w1: 7.5,
+                w2: 6.5,
+                w3: None,
+            },
+            3,
+        ),
         (GuidanceMethod::Bsd { w1: 7.5, w2: 6.5 }, 2),
     ] {
-        let settings = DistillSettings { guidance: method.clone(), ..DistillSettings::paper_rgb() };
+        let settings = DistillSettings {
+            guidance: method.clone(),
+            ..DistillSettings::paper_rgb()
+        };
         let mut d = ScoreDistiller::new(&settings, prior.alphas.clone(), 1).expect("distiller");
         let prompts = cache
             .for_guidance(&prior.text, d.guidance(), "a wooden bench", "blurry")
             .expect("prompts");
         assert_eq!(prompts.text.dims(), [1, 77, 16]);
-        let render = tensor(rand01(61, 3 * h * w), [1, 3, h, w], &device.clone().autodiff()).require_grad();
-        let out = distill_view(&mut d, &models, render.clone(), &view, 0, PriorInputMode::PasteOnGroundTruth, &prompts)
-            .expect("step");
-        assert_eq!((out.diagnostics.unet_calls, out.diagnostics.unet_batch), (1, batch));
-        assert!(out.diagnostics.grad_norm.is_finite() && out.diagnostics.grad_norm > 0.0, "{method:?}");
+        let render = tensor(
+            rand01(61, 3 * h * w),
+            [1, 3, h, w],
+            &device.clone().autodiff(),
+        )
+        .require_grad();
+        let out = distill_view(
+            &mut d,
+            &models,
+            render.clone(),
+            &view,
+            0,
+            PriorInputMode::PasteOnGroundTruth,
+            &prompts,
+        )
+        .expect("step");
+        assert_eq!(
+            (out.diagnostics.unet_calls, out.diagnostics.unet_batch),
+            (1, batch)
+        );
+        assert!(
+            out.diagnostics.grad_norm.is_finite() && out.diagnostics.grad_norm > 0.0,
+            "{method:?}"
+        );
         let grad = host(render.grad(&out.loss.backward()).expect("grad"));
         let mut inside = 0.0f32;
         for (i, v) in grad.iter().enumerate() {

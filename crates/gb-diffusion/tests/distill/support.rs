@@ -33,7 +33,10 @@ impl InpaintEpsPredictor for MockUnet {
         let [n, c, h, w] = batch.noisy_latents.dims();
         self.calls.borrow_mut().push((n, batch.timestep));
         let device = batch.noisy_latents.device();
-        let text_mean = batch.text_embeddings.mean_dims(&[1, 2]).reshape([n, 1, 1, 1]);
+        let text_mean = batch
+            .text_embeddings
+            .mean_dims(&[1, 2])
+            .reshape([n, 1, 1, 1]);
         let ramp = Tensor::<1>::from_data(
             TensorData::new((1..=c).map(|v| v as f32).collect::<Vec<_>>(), [c]),
             &device,
@@ -54,7 +57,13 @@ impl InpaintEpsPredictor for MockUnet {
 }
 
 /// Host version of the mock for one row: `x_t`, text mean, mask (`h*w`), masked latents.
-pub fn mock_eps_host(x_t: &[f32], text_mean: f32, mask: &[f32], masked: &[f32], hw: usize) -> Vec<f32> {
+pub fn mock_eps_host(
+    x_t: &[f32],
+    text_mean: f32,
+    mask: &[f32],
+    masked: &[f32],
+    hw: usize,
+) -> Vec<f32> {
     (0..x_t.len())
         .map(|i| {
             let c = i / hw;
@@ -136,7 +145,12 @@ impl LatentEncoder for LinearPoolEncoder {
         if image.is_autodiff() {
             weight = weight.autodiff();
         }
-        Ok(conv2d(image, weight, None, ConvOptions::new([2, 2], [0, 0], [1, 1], 1)))
+        Ok(conv2d(
+            image,
+            weight,
+            None,
+            ConvOptions::new([2, 2], [0, 0], [1, 1], 1),
+        ))
     }
 
     fn downsample_factor(&self) -> usize {
@@ -157,7 +171,11 @@ impl ConvEncoder {
         Self {
             w1: tensor(scale(randn(seed, 8 * 3 * 9), 0.3), [8, 3, 3, 3], device),
             b1: tensor(scale(randn(seed + 1, 8), 0.1), [8], device),
-            w2: tensor(scale(randn(seed + 2, LATENT_C * 8), 0.4), [LATENT_C, 8, 1, 1], device),
+            w2: tensor(
+                scale(randn(seed + 2, LATENT_C * 8), 0.4),
+                [LATENT_C, 8, 1, 1],
+                device,
+            ),
         }
     }
 }
@@ -166,9 +184,23 @@ impl LatentEncoder for ConvEncoder {
     fn encode(&self, image: Tensor<4>) -> Result<Tensor<4>, DistillError> {
         let ad = image.is_autodiff();
         let lift4 = |t: &Tensor<4>| if ad { t.clone().autodiff() } else { t.clone() };
-        let b1 = if ad { self.b1.clone().autodiff() } else { self.b1.clone() };
-        let h = conv2d(image, lift4(&self.w1), Some(b1), ConvOptions::new([2, 2], [1, 1], [1, 1], 1));
-        Ok(conv2d(h.tanh(), lift4(&self.w2), None, ConvOptions::new([1, 1], [0, 0], [1, 1], 1)))
+        let b1 = if ad {
+            self.b1.clone().autodiff()
+        } else {
+            self.b1.clone()
+        };
+        let h = conv2d(
+            image,
+            lift4(&self.w1),
+            Some(b1),
+            ConvOptions::new([2, 2], [1, 1], [1, 1], 1),
+        );
+        Ok(conv2d(
+            h.tanh(),
+            lift4(&self.w2),
+            None,
+            ConvOptions::new([1, 1], [0, 0], [1, 1], 1),
+        ))
     }
 
     fn downsample_factor(&self) -> usize {
@@ -190,7 +222,10 @@ pub fn wgpu_env() {
 /// Max absolute difference.
 pub fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
     assert_eq!(a.len(), b.len());
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
 }
 
 /// Max absolute value.

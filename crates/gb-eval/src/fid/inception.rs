@@ -287,7 +287,7 @@ enum Mixed {
     /// 8x8 block with split 1x3 / 3x1 branches; `max_pool` for the last block.
     E {
         convs: Box<[ConvBn; 8]>,
-        pool_conv: ConvBn,
+        pool_conv: Box<ConvBn>,
         max_pool: bool,
     },
 }
@@ -351,7 +351,7 @@ impl Mixed {
         Ok((
             Mixed::E {
                 convs,
-                pool_conv,
+                pool_conv: Box::new(pool_conv),
                 max_pool,
             },
             c_conv + c1 + c2 + c3 + c4 + c5,
@@ -401,7 +401,7 @@ impl Mixed {
                 pool_conv,
                 max_pool,
             } => {
-                let [conv, tower_conv, t_m, t_m1, t1_conv, t1_conv_1, t1_m, t1_m1] = convs.as_ref();
+                let [conv, tower_conv, t_m, t_m1, t1_conv, t1_conv_1, t1_m, t1_m1] = &**convs;
                 let a = tower_conv.forward(x.clone());
                 let b = t1_conv_1.forward(t1_conv.forward(x.clone()));
                 let pooled = if *max_pool {

@@ -34,7 +34,9 @@ pub fn mask(name: &str) -> Vec<bool> {
 pub fn number(v: &Value) -> f64 {
     match v {
         Value::String(s) if s == "inf" => f64::INFINITY,
-        other => other.as_f64().unwrap_or_else(|| panic!("not a number: {other}")),
+        other => other
+            .as_f64()
+            .unwrap_or_else(|| panic!("not a number: {other}")),
     }
 }
 
@@ -49,7 +51,11 @@ pub struct Deviation {
 impl Deviation {
     /// A tracker for `what` with tolerance `tol`.
     pub fn new(what: &'static str, tol: f64) -> Self {
-        Self { what, tol, max: 0.0 }
+        Self {
+            what,
+            tol,
+            max: 0.0,
+        }
     }
 
     /// Checks `got` against `want` for `case`.
@@ -60,11 +66,19 @@ impl Deviation {
         }
         let d = (got - want).abs();
         self.max = self.max.max(d);
-        assert!(d <= self.tol, "{} {case}: got {got}, want {want} (|d| = {d:e} > {:e})", self.what, self.tol);
+        assert!(
+            d <= self.tol,
+            "{} {case}: got {got}, want {want} (|d| = {d:e} > {:e})",
+            self.what,
+            self.tol
+        );
     }
 
     /// Prints the largest deviation (visible with `--nocapture`).
     pub fn report(&self) {
-        println!("{}: largest deviation {:e} (tolerance {:e})", self.what, self.max, self.tol);
+        println!(
+            "{}: largest deviation {:e} (tolerance {:e})",
+            self.what, self.max, self.tol
+        );
     }
 }

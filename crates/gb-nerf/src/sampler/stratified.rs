@@ -135,7 +135,10 @@ mod tests {
 
     #[test]
     fn occupancy_skips_empty_cells_and_terminates_behind_opaque_cells() {
-        let space = SceneSpace::Aabb { min: [-1.0; 3], max: [1.0; 3] };
+        let space = SceneSpace::Aabb {
+            min: [-1.0; 3],
+            max: [1.0; 3],
+        };
         // ray along -z through the box from z = 1 to z = -1, 16 samples
         let rays = one_ray(1.0, 3.0);
         let mut grid = OccupancyGrid::new(4, 1.0);
@@ -145,7 +148,11 @@ mod tests {
             grid.occupied[c] = z == 1 || z == 2;
         }
         let s = sample_rays::<rand_chacha::ChaCha8Rng>(&rays, &space, 16, Some(&grid), None);
-        assert_eq!(s.slots.len(), 8, "half of the samples lie in occupied cells");
+        assert_eq!(
+            s.slots.len(),
+            8,
+            "half of the samples lie in occupied cells"
+        );
         // an opaque running density in the first occupied layer stops the march there:
         // 4 samples of delta 0.125 at density 40 give T = exp(-20) < 1e-4 after 2 samples
         for c in 0..64 {
