@@ -89,13 +89,31 @@ pub fn test_backends() -> Vec<BackendKind> {
     }
 }
 
+/// The backends a test of a whole network (U-Net, pipeline, NeRF training) should visit:
+/// ndarray and flex, plus wgpu when `GB_TEST_HEAVY_WGPU=1`.
+///
+/// On a CPU-only machine wgpu runs on Mesa's lavapipe, which JIT-compiles every distinct
+/// kernel; a full network then takes minutes per test. CI therefore checks wgpu on the
+/// operator-level tests (which use [`test_backends`]) and leaves the whole-network wgpu runs
+/// to machines with a GPU (`GB_TEST_HEAVY_WGPU=1`). `GB_TEST_BACKENDS` still restricts both.
+pub fn heavy_test_backends() -> Vec<BackendKind> {
+    let heavy_wgpu = std::env::var("GB_TEST_HEAVY_WGPU").is_ok_and(|v| v == "1");
+    test_backends()
+        .into_iter()
+        .filter(|k| heavy_wgpu || *k != BackendKind::Wgpu)
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn parses_names_and_rejects_unknown() {
-        assert_eq!("ndarray".parse::<BackendKind>().unwrap(), BackendKind::Ndarray);
+        assert_eq!(
+            "ndarray".parse::<BackendKind>().unwrap(),
+            BackendKind::Ndarray
+        );
         assert_eq!("FLEX".parse::<BackendKind>().unwrap(), BackendKind::Flex);
         assert_eq!("wgpu".parse::<BackendKind>().unwrap(), BackendKind::Wgpu);
         let err = "cuda".parse::<BackendKind>().unwrap_err();
@@ -111,5 +129,4 @@ mod tests {
             assert_eq!(s, 6.5, "backend {kind}");
         }
     }
-
 }

@@ -7,6 +7,6 @@ pub mod image_io;
 pub mod testdata;
 
 pub use atomic::write_atomic;
-pub use backend::{test_backends, BackendKind};
+pub use backend::{heavy_test_backends, test_backends, BackendKind};
 pub use testdata::test_data_dir;
 pub use image_io::{read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage};

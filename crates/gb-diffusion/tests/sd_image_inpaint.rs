@@ -3,7 +3,7 @@
 
 mod sd_image_common;
 
-use gb_core::{read_gray, read_rgb, test_backends};
+use gb_core::{heavy_test_backends, read_gray, read_rgb};
 use gb_diffusion::inpaint::{inpaint, prepare_conditioning, InpaintPrior, InpaintRequest};
 use sd_image_common::{fixture, max_abs_err, read_f32};
 
@@ -29,7 +29,7 @@ fn request() -> InpaintRequest {
 #[test]
 fn inpainting_matches_diffusers_pipeline() {
     let req = request();
-    for kind in test_backends() {
+    for kind in heavy_test_backends() {
         let device = kind.device();
         let prior = InpaintPrior::load(&fixture("pipeline"), &device).expect("load prior");
         let cond = prepare_conditioning(&prior, &req).unwrap();

@@ -3,14 +3,14 @@
 
 mod sd_image_common;
 
-use gb_core::test_backends;
+use gb_core::heavy_test_backends;
 use gb_diffusion::models::{load_unet, load_vae};
 use sd_image_common::{fixture, max_abs_err, read_f32, tensor3, tensor4};
 
 const TOL: f32 = 1e-4;
 
 fn unet_parity(model_dir: &str, io: &str) {
-    for kind in test_backends() {
+    for kind in heavy_test_backends() {
         let device = kind.device();
         let (unet, _) = load_unet(&fixture(model_dir), &device).expect("load unet");
         let sample = tensor4(io, "sample", &device);
@@ -36,7 +36,7 @@ fn unet_sd2_linear_projection_matches_diffusers() {
 
 fn vae_encode_parity(model_dir: &str) {
     let io = "vae_encode_io.safetensors";
-    for kind in test_backends() {
+    for kind in heavy_test_backends() {
         let device = kind.device();
         let (vae, _) = load_vae(&fixture(model_dir), &device).expect("load vae");
         let mean = vae.encode_mean(tensor4(io, "image", &device));
@@ -60,7 +60,7 @@ fn vae_with_old_attention_names_matches_diffusers() {
 #[test]
 fn vae_decode_matches_diffusers() {
     let io = "vae_decode_io.safetensors";
-    for kind in test_backends() {
+    for kind in heavy_test_backends() {
         let device = kind.device();
         let (vae, _) = load_vae(&fixture("vae"), &device).expect("load vae");
         let image = vae.decode(tensor4(io, "latents", &device));

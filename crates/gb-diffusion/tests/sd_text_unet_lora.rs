@@ -6,7 +6,7 @@
 mod sd_text_common;
 
 use burn::tensor::{Tensor, TensorData};
-use gb_core::test_backends;
+use gb_core::heavy_test_backends;
 use gb_diffusion::checkpoint::keymap;
 use gb_diffusion::lora::write::LoraExport;
 use gb_diffusion::lora::{
@@ -44,7 +44,7 @@ fn diffusers_unet_lora_with_conv_matches_on_every_backend() {
     let file = LoraFile::read(&fixtures().join("lora/unet_lora.safetensors")).unwrap();
     assert!(file.entries.iter().any(|e| e.down_shape.len() == 4));
     let want = expected();
-    for kind in test_backends() {
+    for kind in heavy_test_backends() {
         let device = kind.device();
         let (unet, _) = load_unet(&image_fixtures().join("pipeline"), &device).unwrap();
         let (unet, n) = apply_lora(unet, &file, LoraComponent::Unet, &keymap::UNET).unwrap();

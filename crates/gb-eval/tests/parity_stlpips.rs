@@ -4,7 +4,7 @@
 mod common;
 
 use common::{expected, image, number, Deviation};
-use gb_core::{test_backends, test_data_dir};
+use gb_core::{heavy_test_backends, test_data_dir};
 use gb_eval::stlpips::StLpips;
 use gb_eval::MetricError;
 
@@ -18,7 +18,7 @@ fn weights() -> std::path::PathBuf {
 fn stlpips_matches_the_package_on_every_backend() {
     let doc = expected();
     let cases = doc["cases"].as_array().unwrap();
-    for kind in test_backends() {
+    for kind in heavy_test_backends() {
         let model = StLpips::load(&weights(), &kind.device()).expect("weights load");
         let mut dev = Deviation::new("ST-LPIPS", TOL);
         // wgpu runs on a software rasteriser here: keep it to a few small cases.

@@ -112,7 +112,7 @@ fn check(config: FieldConfig) {
     let reference = config.init(&reference_device);
     let bytes = reference.clone().into_record().into_bytes().unwrap();
     let expected = run(&reference);
-    for kind in gb_core::test_backends() {
+    for kind in gb_core::heavy_test_backends() {
         let device = kind.autodiff_device();
         let record = ModuleRecord::from_bytes(bytes.clone()).unwrap();
         let field = config.init(&device).load_record(record);

@@ -49,7 +49,7 @@ fn volume_rendering_matches_pytorch() {
         v["rays"].as_u64().unwrap() as usize,
         v["samples"].as_u64().unwrap() as usize,
     );
-    for kind in gb_core::test_backends() {
+    for kind in gb_core::heavy_test_backends() {
         let dev = kind.autodiff_device();
         let t2 = |k: &str| Tensor::<2>::from_data(TensorData::new(floats(&v[k]), [r, s]), &dev);
         let sigma = t2("sigma").require_grad();
@@ -143,7 +143,7 @@ fn hash_encoding_matches_pytorch() {
         .collect();
     let n = pts.len();
     let width = cfg.output_dim();
-    for kind in gb_core::test_backends() {
+    for kind in gb_core::heavy_test_backends() {
         let dev = kind.autodiff_device();
         let rows = cfg.levels * cfg.table_size();
         let table = Tensor::<2>::from_data(
@@ -189,7 +189,7 @@ fn plane_fit_matches_pytorch() {
         cx: p["cx"].as_f64().unwrap() as f32,
         cy: p["cy"].as_f64().unwrap() as f32,
     };
-    for kind in gb_core::test_backends() {
+    for kind in gb_core::heavy_test_backends() {
         let dev = kind.autodiff_device();
         for case in p["cases"].as_array().unwrap() {
             let cfg = PlaneFitConfig {

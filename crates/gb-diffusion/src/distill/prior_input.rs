@@ -86,14 +86,42 @@ pub fn crop_resize(
     if bbox.width == resolution && bbox.height == resolution {
         return crop;
     }
-    let mode = if nearest {
-        InterpolateMode::Nearest
-    } else {
-        InterpolateMode::Bilinear
-    };
-    let mut options = InterpolateOptions::new(mode);
-    options.align_corners = false;
-    interpolate(crop, options.with_output_size([resolution, resolution]))
+    if nearest {
+        let mut options = InterpolateOptions::new(InterpolateMode::Nearest);
+        options.align_corners = false;
+        return interpolate(crop, options.with_output_size([resolution, resolution]));
+    }
+    bilinear_resize(crop, resolution, resolution)
+}
+
+/// Bilinear resize of `[B, C, H, W]` to `[B, C, out_h, out_w]` with half-pixel centres (the
+/// semantics of `F.interpolate(mode="bilinear", align_corners=False, antialias=False)`),
+/// written as two matrix products so that its gradient exists on every backend (ndarray has
+/// no backward for `interpolate`'s bilinear mode).
+pub fn bilinear_resize(image: Tensor<4>, out_h: usize, out_w: usize) -> Tensor<4> {
+    let [b, c, h, w] = image.dims();
+    let device = image.device();
+    let rows = linear_resize_matrix(h, out_h, &device); // [out_h, h]
+    let cols = linear_resize_matrix(w, out_w, &device).transpose(); // [w, out_w]
+    let flat = image.reshape([b * c, h, w]);
+    let rows = rows.unsqueeze::<3>().repeat_dim(0, b * c);
+    let cols = cols.unsqueeze::<3>().repeat_dim(0, b * c);
+    rows.matmul(flat).matmul(cols).reshape([b, c, out_h, out_w])
+}
+
+/// The `[output, input]` matrix of 1D linear interpolation with half-pixel centres.
+fn linear_resize_matrix(input: usize, output: usize, device: &burn::tensor::Device) -> Tensor<2> {
+    let mut m = vec![0f32; output * input];
+    let scale = input as f32 / output as f32;
+    for o in 0..output {
+        let src = ((o as f32 + 0.5) * scale - 0.5).max(0.0);
+        let i0 = (src.floor() as usize).min(input - 1);
+        let i1 = (i0 + 1).min(input - 1);
+        let frac = src - i0 as f32;
+        m[o * input + i0] += 1.0 - frac;
+        m[o * input + i1] += frac;
+    }
+    Tensor::from_data(burn::tensor::TensorData::new(m, [output, input]), device)
 }
 
 /// The full-resolution image whose crop the prior sees: `render` alone, or
@@ -124,6 +152,29 @@ pub fn compose(
             }
             let outside = gt * (m.ones_like() - m.clone());
             Ok(render * m + outside)
+        }
+    }
+}
+
+#[cfg(test)]
+mod resize_tests {
+    use super::*;
+
+    #[test]
+    fn matrix_bilinear_resize_equals_interpolate_forward() {
+        let device = gb_core::BackendKind::Flex.device();
+        let values: Vec<f32> = (0..2 * 3 * 7 * 5)
+            .map(|i| ((i * 37) % 11) as f32 * 0.1)
+            .collect();
+        let x =
+            Tensor::<4>::from_data(burn::tensor::TensorData::new(values, [2, 3, 7, 5]), &device);
+        for (oh, ow) in [(4, 4), (12, 9), (7, 5), (3, 8)] {
+            let mut options = InterpolateOptions::new(InterpolateMode::Bilinear);
+            options.align_corners = false;
+            let reference = interpolate(x.clone(), options.with_output_size([oh, ow]));
+            let ours = bilinear_resize(x.clone(), oh, ow);
+            let diff: f32 = (reference - ours).abs().max().into_scalar::<f32>();
+            assert!(diff < 1e-5, "{oh}x{ow}: max diff {diff}");
         }
     }
 }
