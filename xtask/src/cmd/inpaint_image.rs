@@ -100,7 +100,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let chw: Vec<f32> = image
         .into_data()
         .convert::<f32>()
-        .to_vec()
+        .try_to_vec()
         .map_err(|e| anyhow::anyhow!("reading the result back: {e:?}"))?;
     let mut data = vec![0f32; h * w * 3];
     for c in 0..3 {

@@ -185,7 +185,7 @@ fn run_text_encoder(
     let values = out
         .into_data()
         .convert::<f32>()
-        .to_vec::<f32>()
+        .try_to_vec::<f32>()
         .map_err(|e| anyhow::anyhow!("reading output: {e:?}"))?;
     Ok(vec![("last_hidden_state", TensorOut::F32(values, dims))])
 }
@@ -197,7 +197,7 @@ fn f32_out<const D: usize>(t: Tensor<D>) -> anyhow::Result<TensorOut> {
     let values = t
         .into_data()
         .convert::<f32>()
-        .to_vec::<f32>()
+        .try_to_vec::<f32>()
         .map_err(|e| anyhow::anyhow!("reading output: {e:?}"))?;
     Ok(TensorOut::F32(values, dims))
 }

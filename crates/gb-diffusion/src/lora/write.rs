@@ -66,7 +66,7 @@ pub fn collect_lora<M: Module>(module: &M) -> Result<Vec<CollectedLora>, LoraErr
         })?;
         let values = data
             .convert::<f32>()
-            .to_vec::<f32>()
+            .try_to_vec::<f32>()
             .map_err(|e| LoraError::File {
                 path: name.clone().into(),
                 message: format!("cannot read adapter tensor: {e:?}"),

@@ -100,7 +100,7 @@ impl FidExtractor {
             );
             let feats = self.net.forward(x).into_data();
             let values = feats
-                .to_vec::<f32>()
+                .try_to_vec::<f32>()
                 .map_err(|_| FidError::NonFinite("network output (not f32)"))?;
             tracing::debug!(batch = b, images = chunk.len(), "FID features");
             out.extend(values);
