@@ -20,7 +20,11 @@ impl RgbImage {
         for _ in 0..width * height {
             data.extend_from_slice(&rgb);
         }
-        Self { width, height, data }
+        Self {
+            width,
+            height,
+            data,
+        }
     }
 
     /// The colour at pixel (x, y).
@@ -60,7 +64,10 @@ pub enum ImageIoError {
 /// Reads a PNG/JPEG as RGB in [0, 1]. Alpha, if present, is composited on `background`
 /// (pass `None` to drop alpha).
 pub fn read_rgb(path: &Path, background: Option<[f32; 3]>) -> Result<RgbImage, ImageIoError> {
-    let img = image::open(path).map_err(|source| ImageIoError::Read { path: path.to_path_buf(), source })?;
+    let img = image::open(path).map_err(|source| ImageIoError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
     let rgba = img.to_rgba32f();
     let (w, h) = (rgba.width() as usize, rgba.height() as usize);
     let mut data = Vec::with_capacity(w * h * 3);
@@ -75,13 +82,20 @@ pub fn read_rgb(path: &Path, background: Option<[f32; 3]>) -> Result<RgbImage, I
             None => data.extend_from_slice(&[r, g, b]),
         }
     }
-    Ok(RgbImage { width: w, height: h, data })
+    Ok(RgbImage {
+        width: w,
+        height: h,
+        data,
+    })
 }
 
 /// Reads a single-channel image (e.g. a mask); returns `(width, height, values)` with
 /// 8-bit values divided by 255 and 16-bit values by 65535.
 pub fn read_gray(path: &Path) -> Result<(usize, usize, Vec<f32>), ImageIoError> {
-    let img = image::open(path).map_err(|source| ImageIoError::Read { path: path.to_path_buf(), source })?;
+    let img = image::open(path).map_err(|source| ImageIoError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
     let g = img.to_luma32f();
     Ok((g.width() as usize, g.height() as usize, g.into_raw()))
 }
@@ -93,11 +107,22 @@ fn to_u8(v: f32) -> u8 {
 /// Writes an RGB image in [0, 1] as an 8-bit PNG, atomically.
 pub fn write_rgb_png(path: &Path, img: &RgbImage) -> Result<(), ImageIoError> {
     let bytes: Vec<u8> = img.data.iter().map(|&v| to_u8(v)).collect();
-    encode_png(path, &bytes, img.width, img.height, image::ExtendedColorType::Rgb8)
+    encode_png(
+        path,
+        &bytes,
+        img.width,
+        img.height,
+        image::ExtendedColorType::Rgb8,
+    )
 }
 
 /// Writes a single-channel image in [0, 1] as an 8-bit grayscale PNG, atomically.
-pub fn write_gray_png(path: &Path, width: usize, height: usize, values: &[f32]) -> Result<(), ImageIoError> {
+pub fn write_gray_png(
+    path: &Path,
+    width: usize,
+    height: usize,
+    values: &[f32],
+) -> Result<(), ImageIoError> {
     let bytes: Vec<u8> = values.iter().map(|&v| to_u8(v)).collect();
     encode_png(path, &bytes, width, height, image::ExtendedColorType::L8)
 }
@@ -113,9 +138,14 @@ fn encode_png(
     let mut buf = Vec::new();
     image::codecs::png::PngEncoder::new(&mut buf)
         .write_image(bytes, width as u32, height as u32, color)
-        .map_err(|e| ImageIoError::Write { path: path.to_path_buf(), reason: e.to_string() })?;
-    crate::atomic::write_atomic(path, &buf)
-        .map_err(|e| ImageIoError::Write { path: path.to_path_buf(), reason: e.to_string() })
+        .map_err(|e| ImageIoError::Write {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+    crate::atomic::write_atomic(path, &buf).map_err(|e| ImageIoError::Write {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })
 }
 
 #[cfg(test)]

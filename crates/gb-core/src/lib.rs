@@ -8,5 +8,5 @@ pub mod testdata;
 
 pub use atomic::write_atomic;
 pub use backend::{heavy_test_backends, test_backends, BackendKind};
-pub use testdata::test_data_dir;
 pub use image_io::{read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage};
+pub use testdata::test_data_dir;

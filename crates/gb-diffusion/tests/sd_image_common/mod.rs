@@ -52,7 +52,7 @@ pub fn tensor3(file: &str, key: &str, device: &Device) -> Tensor<3> {
 /// Maximum absolute difference between a tensor and expected values (shape checked).
 pub fn max_abs_err<const D: usize>(got: Tensor<D>, want: &[f32], want_shape: &[usize]) -> f32 {
     assert_eq!(got.dims().as_slice(), want_shape, "shape");
-    let got: Vec<f32> = got.into_data().convert::<f32>().to_vec().unwrap();
+    let got: Vec<f32> = got.into_data().convert::<f32>().try_to_vec().unwrap();
     got.iter()
         .zip(want)
         .map(|(a, b)| (a - b).abs())

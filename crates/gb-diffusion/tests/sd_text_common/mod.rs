@@ -40,7 +40,7 @@ pub fn read_i64_rows(file: &str, name: &str) -> Vec<Vec<i64>> {
 pub fn max_abs_err<const D: usize>(actual: Tensor<D>, expected: &(Vec<f32>, Vec<usize>)) -> f32 {
     assert_eq!(actual.dims().to_vec(), expected.1, "shape");
     let data: TensorData = actual.into_data();
-    let values = data.convert::<f32>().to_vec::<f32>().unwrap();
+    let values = data.convert::<f32>().try_to_vec::<f32>().unwrap();
     values
         .iter()
         .zip(&expected.0)
