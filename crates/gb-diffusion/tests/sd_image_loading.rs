@@ -153,7 +153,7 @@ fn vae_encoder_gradient_matches_finite_differences() {
         .unwrap()
         .into_data()
         .convert::<f32>()
-        .to_vec()
+        .try_to_vec()
         .unwrap();
     let f = |v: &[f32]| -> f64 {
         let x = Tensor::<4>::from_data(TensorData::new(v.to_vec(), [1, 3, 16, 16]), &plain);
@@ -174,5 +174,3 @@ fn vae_encoder_gradient_matches_finite_differences() {
     }
     assert!(g.iter().any(|v| v.abs() > 1e-4), "gradient is not all zero");
 }
-
-use burn::tensor::ElementConversion;

@@ -83,8 +83,8 @@ fn opencv_model_file_is_read_completely() {
     assert!((model.svr.gamma - 0.05).abs() < 1e-15);
     assert!((model.svr.rho - -149.63506109127357).abs() < 1e-9);
     assert_eq!(model.range.min.len(), 36);
-    assert_eq!(model.range.min[0], 0.344_000_012_f32);
-    assert_eq!(model.range.max[35], 0.538_609_207_f32);
+    assert_eq!(model.range.min[0], 0.344_f32);
+    assert_eq!(model.range.max[35], 0.538_609_2_f32);
 }
 
 #[test]

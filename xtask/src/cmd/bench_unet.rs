@@ -90,7 +90,7 @@ fn time_best(repeats: usize, mut f: impl FnMut()) -> f64 {
 
 /// Runs the benchmark and writes its JSON.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.latent == 0 || args.latent % 8 != 0 || args.batch == 0 {
+    if args.latent == 0 || !args.latent.is_multiple_of(8) || args.batch == 0 {
         bail!("--latent must be a positive multiple of 8 and --batch at least 1");
     }
     if args.vae_sizes.iter().any(|&s| s == 0 || s % 8 != 0) {

@@ -120,7 +120,9 @@ impl LpipsNetArg {
     }
 }
 
-/// A loaded LPIPS network of either kind.
+/// A loaded LPIPS network of either kind. One instance lives for a whole run, so the size
+/// difference between the variants costs nothing worth a box.
+#[allow(clippy::large_enum_variant)]
 enum LpipsModel {
     Shift(StLpips),
     Standard(Lpips),

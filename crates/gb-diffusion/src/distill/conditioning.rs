@@ -120,7 +120,7 @@ impl ViewConditioning {
             });
         }
         let f = encoder.downsample_factor();
-        if resolution == 0 || resolution % f != 0 {
+        if resolution == 0 || !resolution.is_multiple_of(f) {
             return Err(DistillError::Config {
                 field: "resolution",
                 message: format!(
@@ -179,9 +179,14 @@ impl ViewCache {
         mask: Tensor<4>,
         resolution: usize,
     ) -> Result<&ViewConditioning, DistillError> {
-        if !self.views.contains_key(&view) {
-            let cond = ViewConditioning::new(view, encoder, ground_truth, mask, resolution)?;
-            self.views.insert(view, cond);
+        if let std::collections::hash_map::Entry::Vacant(slot) = self.views.entry(view) {
+            slot.insert(ViewConditioning::new(
+                view,
+                encoder,
+                ground_truth,
+                mask,
+                resolution,
+            )?);
         }
         self.get(view)
     }

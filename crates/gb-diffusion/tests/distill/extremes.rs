@@ -172,15 +172,16 @@ fn all_zero_and_full_masks() {
         assert!(image_grad.iter().all(|v| v.is_finite()));
     }
     // An empty image mask has no bounding box: a clear error naming the view.
-    let err = ViewConditioning::new(
+    let err = match ViewConditioning::new(
         7,
         &encoder,
         tensor(vec![0.5; 3 * 64], [1, 3, 8, 8], &device),
         tensor(vec![0.0; 64], [1, 1, 8, 8], &device),
         8,
-    )
-    .err()
-    .expect("empty mask rejected");
+    ) {
+        Err(e) => e,
+        Ok(_) => panic!("empty mask accepted"),
+    };
     assert!(matches!(err, DistillError::EmptyMask(_)), "{err}");
     assert!(err.to_string().contains("view 7"), "{err}");
     // A full image mask is a bounding box of the whole image.

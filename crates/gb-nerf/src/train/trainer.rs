@@ -214,7 +214,7 @@ impl Trainer {
         let Some(grid) = self.occupancy.as_mut() else {
             return;
         };
-        if self.step >= cfg.warmup_steps && self.step % cfg.update_every == 0 {
+        if self.step >= cfg.warmup_steps && self.step.is_multiple_of(cfg.update_every) {
             let valid = self.field.valid();
             grid.update(&valid, cfg.cells_per_update, cfg.decay, &mut self.rng);
         }
@@ -259,7 +259,7 @@ impl Trainer {
             last = Some(s);
             let every = self.config.train.checkpoint_every;
             if let Some(path) = checkpoint {
-                if (every > 0 && self.step % every == 0) || self.step == total {
+                if (every > 0 && self.step.is_multiple_of(every)) || self.step == total {
                     self.save_checkpoint(path)?;
                 }
             }
