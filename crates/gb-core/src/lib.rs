@@ -4,6 +4,7 @@
 pub mod atomic;
 pub mod backend;
 pub mod image_io;
+pub mod resample;
 pub mod testdata;
 
 pub use atomic::write_atomic;

@@ -111,16 +111,7 @@ pub fn bilinear_resize(image: Tensor<4>, out_h: usize, out_w: usize) -> Tensor<4
 
 /// The `[output, input]` matrix of 1D linear interpolation with half-pixel centres.
 fn linear_resize_matrix(input: usize, output: usize, device: &burn::tensor::Device) -> Tensor<2> {
-    let mut m = vec![0f32; output * input];
-    let scale = input as f32 / output as f32;
-    for o in 0..output {
-        let src = ((o as f32 + 0.5) * scale - 0.5).max(0.0);
-        let i0 = (src.floor() as usize).min(input - 1);
-        let i1 = (i0 + 1).min(input - 1);
-        let frac = src - i0 as f32;
-        m[o * input + i0] += 1.0 - frac;
-        m[o * input + i1] += frac;
-    }
+    let m = gb_core::resample::bilinear_matrix(input, output);
     Tensor::from_data(burn::tensor::TensorData::new(m, [output, input]), device)
 }
 

@@ -93,29 +93,19 @@ fn sq_norm(v: &[Tensor<2>; 3]) -> Tensor<2> {
     v[0].clone().square() + v[1].clone().square() + v[2].clone().square()
 }
 
-/// Row weights of a 1-D bilinear resampling from `src` to `dst` samples with half-pixel
-/// centres (PyTorch's `align_corners=False`): `[dst, src]`, row-major.
-fn bilinear_matrix(src: usize, dst: usize) -> Vec<f32> {
-    let mut m = vec![0.0f32; dst * src];
-    let scale = src as f32 / dst as f32;
-    for o in 0..dst {
-        let x = ((o as f32 + 0.5) * scale - 0.5).max(0.0);
-        let i0 = (x.floor() as usize).min(src - 1);
-        let i1 = (i0 + 1).min(src - 1);
-        let l = x - i0 as f32;
-        m[o * src + i0] += 1.0 - l;
-        m[o * src + i1] += l;
-    }
-    m
-}
-
 /// Bilinear upsampling of `[C, hs, ws]` to `[C, h, w]` as two matrix products (a linear map,
 /// so it is differentiable on every backend; burn-ndarray has no bilinear backward).
 fn upsample_bilinear(x: Tensor<3>, h: usize, w: usize) -> Tensor<3> {
     let [c, hs, ws] = x.dims();
     let device = x.device();
-    let my = Tensor::<2>::from_data(TensorData::new(bilinear_matrix(hs, h), [h, hs]), &device);
-    let mx = Tensor::<2>::from_data(TensorData::new(bilinear_matrix(ws, w), [w, ws]), &device);
+    let my = Tensor::<2>::from_data(
+        TensorData::new(gb_core::resample::bilinear_matrix(hs, h), [h, hs]),
+        &device,
+    );
+    let mx = Tensor::<2>::from_data(
+        TensorData::new(gb_core::resample::bilinear_matrix(ws, w), [w, ws]),
+        &device,
+    );
     let my = my.unsqueeze_dim::<3>(0).repeat_dim(0, c);
     let mxt = mx.transpose().unsqueeze_dim::<3>(0).repeat_dim(0, c);
     my.matmul(x).matmul(mxt)
