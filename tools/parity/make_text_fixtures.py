@@ -25,6 +25,8 @@ Writes into crates/gb-diffusion/tests/fixtures/sd_text/:
                             and the 3x3 convs conv1 / conv_in; unet_lora_io.safetensors holds
                             its output `out_lora` on sd_image/unet_sd15_io.safetensors inputs
 Run: /work/pyref/bin/python tools/parity/make_text_fixtures.py
+Check LoRA files gb-diffusion wrote (tools/parity/README.md):
+     /work/pyref/bin/python tools/parity/make_text_fixtures.py --check-exported /tmp/lora_export
 """
 import gzip
 import json
@@ -277,7 +279,85 @@ def diffusers_lora_error(lora_file: Path, model_dir: Path, ids, expected) -> flo
     return (out - expected).abs().max().item()
 
 
+def pipeline_load_lora_error(lora_file: Path) -> dict:
+    """Loads `lora_file` with the public `StableDiffusionPipeline.load_lora_weights` into a
+    pipeline built from the fixtures (sd_text/clip_quick text encoder + tokenizer, sd_image
+    U-Net, VAE and scheduler; the two halves are never run together, so their sizes need not
+    match) and returns, per component the file touches, the max abs error of that component's
+    output against the fixture's expected LoRA output. Also fails on any key diffusers did not
+    use (PEFT reports them as unexpected keys)."""
+    from diffusers import AutoencoderKL, DDIMScheduler, UNet2DConditionModel
+    image = ROOT / "crates/gb-diffusion/tests/fixtures/sd_image"
+    pipe = StableDiffusionPipeline(
+        vae=AutoencoderKL.from_pretrained(str(image / "pipeline/vae")),
+        text_encoder=CLIPTextModel.from_pretrained(str(OUT / "clip_quick/text_encoder")).eval(),
+        tokenizer=CLIPTokenizer.from_pretrained(str(OUT / "tokenizer")),
+        unet=UNet2DConditionModel.from_pretrained(str(image / "pipeline/unet")).eval(),
+        scheduler=DDIMScheduler.from_pretrained(str(image / "pipeline/scheduler")),
+        safety_checker=None, feature_extractor=None, requires_safety_checker=False)
+    keys = load_file(str(lora_file)).keys()
+    import logging
+    records = []
+
+    class Grab(logging.Handler):
+        def emit(self, record):
+            records.append(record.getMessage())
+
+    grab = Grab(level=logging.WARNING)
+    for name in ["diffusers", "peft"]:
+        logging.getLogger(name).addHandler(grab)
+    pipe.load_lora_weights(str(lora_file.parent), weight_name=lora_file.name)
+    for name in ["diffusers", "peft"]:
+        logging.getLogger(name).removeHandler(grab)
+    bad = [r for r in records if "unexpected keys" in r]
+    assert not bad, f"diffusers did not use every tensor of {lora_file}: {bad}"
+    errors = {}
+    with torch.no_grad():
+        if any(k.startswith("text_encoder.") for k in keys):
+            ids = load_file(str(OUT / "text_io.safetensors"))["input_ids"]
+            expected = load_file(str(OUT / "lora_io.safetensors"))["last_hidden_state_lora"]
+            out = pipe.text_encoder(input_ids=ids).last_hidden_state
+            errors["text_encoder"] = (out - expected).abs().max().item()
+        if any(k.startswith("unet.") for k in keys):
+            io = load_file(str(image / "unet_sd15_io.safetensors"))
+            expected = load_file(str(OUT / "unet_lora_io.safetensors"))["out_lora"]
+            out = pipe.unet(io["sample"], io["timestep"], io["encoder_hidden_states"]).sample
+            errors["unet"] = (out - expected).abs().max().item()
+    assert errors, f"{lora_file}: no text_encoder.* or unet.* LoRA tensors"
+    return errors
+
+
+def check_exported(export_dir: Path) -> float:
+    """Checks the files the Rust tests export with GB_LORA_EXPORT_DIR (see
+    tools/parity/README.md): rust_text_lora.safetensors (text encoder, sd_text_parity.rs) and
+    rust_unet_lora.safetensors (U-Net with conv LoRA, sd_text_unet_lora.rs), each through the
+    component loaders and through `pipe.load_lora_weights`. Returns the worst max abs error."""
+    worst = 0.0
+    for name in ["rust_text_lora.safetensors", "rust_unet_lora.safetensors"]:
+        f = export_dir / name
+        if not f.is_file():
+            raise SystemExit(f"{f} is missing: run the export tests first (tools/parity/README.md)")
+        for comp, err in pipeline_load_lora_error(f).items():
+            print(f"pipe.load_lora_weights({name}) -> {comp}: max abs err {err:.3e}")
+            worst = max(worst, err)
+    image = ROOT / "crates/gb-diffusion/tests/fixtures/sd_image"
+    ids = load_file(str(OUT / "text_io.safetensors"))["input_ids"]
+    expected = load_file(str(OUT / "lora_io.safetensors"))["last_hidden_state_lora"]
+    err = diffusers_lora_error(export_dir / "rust_text_lora.safetensors", OUT / "clip_quick", ids, expected)
+    print(f"load_lora_into_text_encoder(rust_text_lora.safetensors): max abs err {err:.3e}")
+    worst = max(worst, err)
+    io = load_file(str(image / "unet_sd15_io.safetensors"))
+    expected = load_file(str(OUT / "unet_lora_io.safetensors"))["out_lora"]
+    err = diffusers_unet_lora_error(export_dir / "rust_unet_lora.safetensors", image / "pipeline/unet", io, expected)
+    print(f"load_lora_into_unet(rust_unet_lora.safetensors): max abs err {err:.3e}")
+    worst = max(worst, err)
+    print(f"worst max abs err {worst:.3e} (bound 1e-4)")
+    return worst
+
+
 if __name__ == "__main__":
+    if len(sys.argv) == 3 and sys.argv[1] == "--check-exported":
+        sys.exit(0 if check_exported(Path(sys.argv[2])) < 1e-4 else 1)
     if len(sys.argv) == 3 and sys.argv[1] == "--check-unet-lora":
         image = ROOT / "crates/gb-diffusion/tests/fixtures/sd_image"
         io = load_file(str(image / "unet_sd15_io.safetensors"))

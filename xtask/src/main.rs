@@ -21,6 +21,8 @@ enum Command {
     Devices(cmd::devices::Args),
     /// The paper's metrics (PSNR, SSIM, LPIPS, FID, NIMA, BRISQUE, D-FID, D-PSNR) on two folders.
     Eval(cmd::eval::Args),
+    /// Fine-tune the geometric prior (LoRA on RGB / normal pairs), or train the tiny prior.
+    Finetune(cmd::finetune::Args),
     /// Object removal: train a NeRF on the unmasked pixels and fill the mask (default job).
     Inpaint(cmd::inpaint::Args),
     /// 2D inpainting with a Stable Diffusion inpainting prior (checks that a prior loads).
@@ -49,6 +51,7 @@ fn main() {
     let result = match cli.command {
         Command::Devices(a) => cmd::devices::run(a),
         Command::Eval(a) => cmd::eval::run(a),
+        Command::Finetune(a) => cmd::finetune::run(a),
         Command::Inpaint(a) => cmd::inpaint::run(a),
         Command::InpaintImage(a) => cmd::inpaint_image::run(a),
         Command::DistillImage(a) => cmd::distill_image::run(a),

@@ -8,6 +8,7 @@ pub mod eval_inputs;
 pub mod fid;
 pub mod image_metrics;
 pub mod lpips;
+pub mod nima;
 pub mod report;
 pub mod stlpips;
 

@@ -310,6 +310,29 @@ mod tests {
     }
 
     #[test]
+    fn columns_are_the_papers_order_with_lpips_last() {
+        let keys: Vec<&str> = COLUMNS.iter().map(|c| c.key).collect();
+        assert_eq!(
+            keys,
+            ["psnr", "ssim", "fid", "nima", "brisque", "d_fid", "d_psnr", "lpips"]
+        );
+        let mut r = EvalReport::new(&["a.png".into()]);
+        r.set("nima", 5.4321);
+        r.set("brisque", 20.0);
+        let md = r.to_markdown();
+        assert!(
+            md.lines().next().unwrap().starts_with(
+                "| region | PSNR ↑ | SSIM ↑ | FID ↓ | NIMA ↑ | BRISQUE ↓ | D-FID ↓ | D-PSNR ↑ | LPIPS ↓ |"
+            ),
+            "{md}"
+        );
+        assert!(
+            md.contains("| full image | - | - | - | 5.432 | 20.00 | - | - | - |"),
+            "{md}"
+        );
+    }
+
+    #[test]
     fn markdown_follows_the_paper_order_and_lists_reasons() {
         let mut r = EvalReport::new(&["a.png".into()]);
         r.set("psnr", 25.0);

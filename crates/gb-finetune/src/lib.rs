@@ -9,12 +9,15 @@
 //! - [`train`]: the inpainting loss, the LoRA / from-scratch trainer, checkpoints, validation.
 
 pub mod captions;
+pub mod crop;
 pub mod diode;
 pub mod error;
 pub mod masks;
 pub mod normal_map;
+pub mod run;
 pub mod sample;
 pub mod synthetic;
+pub mod tiny_prior;
 pub mod train;
 
 pub use error::FinetuneError;

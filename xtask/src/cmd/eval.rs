@@ -2,7 +2,8 @@
 //!
 //! ```text
 //! cargo xtask eval --pred DIR --gt DIR [--masks DIR] [--pred-depth DIR --gt-depth DIR]
-//!     [--metrics psnr,ssim,lpips,...] [--weights DIR] [--json FILE] [--markdown FILE]
+//!     [--metrics psnr,ssim,lpips,...] [--weights DIR] [--nima-weights FILE] [--json FILE]
+//!     [--markdown FILE]
 //! ```
 //! Files pair by sorted name (see `gb_eval::eval_inputs`); the table is printed on stdout and
 //! written to `--markdown`, the JSON (format in `gb_eval::report`) to `--json`.
@@ -43,6 +44,7 @@ use gb_eval::eval_inputs::EvalInputs;
 use gb_eval::fid::{frechet_distance_features, FeatureSet, FidExtractor};
 use gb_eval::image_metrics::{psnr, ssim, Region};
 use gb_eval::lpips::{Backbone, Lpips};
+use gb_eval::nima::Nima;
 use gb_eval::report::{EvalReport, RegionKind, COLUMNS};
 use gb_eval::stlpips::StLpips;
 use gb_eval::MetricError;
@@ -75,6 +77,12 @@ pub struct Args {
     /// Folder holding the metric weights (default: $GB_TEST_DATA/weights when it exists).
     #[arg(long)]
     weights: Option<PathBuf>,
+    /// NIMA weights: pyiqa's NIMA (InceptionResNetV2, AVA) state dict as safetensors, timm
+    /// keys under `base_model.` plus `classifier.2.*` (default:
+    /// `nima_inception_resnet_v2_ava.safetensors` in the weights folder; none ship with the
+    /// project, so NIMA is otherwise unavailable).
+    #[arg(long)]
+    nima_weights: Option<PathBuf>,
     /// Write the JSON report here.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -177,6 +185,8 @@ pub struct Ctx {
     pub device: BackendKind,
     /// Which LPIPS network `lpips` uses.
     pub lpips_net: LpipsNetArg,
+    /// `--nima-weights`, if given.
+    pub nima_weights: Option<PathBuf>,
 }
 
 /// One entry of the dispatch table.
@@ -215,6 +225,11 @@ const METRICS: &[Metric] = &[
         name: "fid",
         needs_depth: false,
         run: run_fid,
+    },
+    Metric {
+        name: "nima",
+        needs_depth: false,
+        run: run_nima,
     },
     Metric {
         name: "brisque",
@@ -287,6 +302,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         weights,
         device: args.device.unwrap_or_default(),
         lpips_net: args.lpips_net,
+        nima_weights: args.nima_weights.clone(),
     };
 
     let mut report = EvalReport::new(&ctx.inputs.names);
@@ -631,5 +647,61 @@ fn run_brisque(ctx: &Ctx, report: &mut EvalReport) -> anyhow::Result<()> {
     }
     pb.finish_and_clear();
     report.set_per_image("brisque", &values);
+    Ok(())
+}
+
+/// NIMA (no reference, higher is better) of the predicted images, averaged per image: pyiqa's
+/// `nima` (InceptionResNetV2, 299x299 input; see `gb_eval::nima`) with the weights of
+/// `--nima-weights`, or of the weights folder's `nima_inception_resnet_v2_ava.safetensors`.
+fn run_nima(ctx: &Ctx, report: &mut EvalReport) -> anyhow::Result<()> {
+    let path = match &ctx.nima_weights {
+        Some(path) => path.clone(),
+        None => {
+            let found = ctx
+                .weights
+                .as_ref()
+                .map(|dir| dir.join(gb_eval::nima::WEIGHTS_FILE))
+                .filter(|p| p.is_file());
+            match found {
+                Some(path) => path,
+                None => {
+                    report.set_unavailable(
+                        "nima",
+                        format!(
+                            "no NIMA weights (none ship with the project): pass --nima-weights FILE, \
+                             pyiqa's NIMA InceptionResNetV2 state dict as safetensors, or put {} in \
+                             the weights folder",
+                            gb_eval::nima::WEIGHTS_FILE
+                        ),
+                    );
+                    return Ok(());
+                }
+            }
+        }
+    };
+    let model = match Nima::load(&path, &ctx.device.device()) {
+        Ok(m) => m,
+        Err(e) => {
+            tracing::warn!("NIMA unavailable: {e}");
+            report.set_unavailable("nima", e.to_string());
+            return Ok(());
+        }
+    };
+    let pb = ctx.progress("nima", ctx.inputs.len());
+    let mut values = Vec::with_capacity(ctx.inputs.len());
+    for i in 0..ctx.inputs.len() {
+        let (pred, _) = ctx.inputs.load_pair(i)?;
+        match gb_eval::nima::nima_score(&model, &pred) {
+            Ok(v) => values.push(v),
+            Err(e) => {
+                pb.finish_and_clear();
+                report.set_unavailable("nima", format!("{}: {e}", ctx.inputs.names[i]));
+                return Ok(());
+            }
+        }
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    report.set_per_image("nima", &values);
     Ok(())
 }

@@ -8,6 +8,7 @@ pub mod devices;
 pub mod distill_bench;
 pub mod distill_image;
 pub mod eval;
+pub mod finetune;
 pub mod inpaint;
 pub mod inpaint_image;
 pub mod parity;

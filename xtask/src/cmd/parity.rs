@@ -18,7 +18,7 @@ use anyhow::{bail, Context};
 use burn::module::Module;
 use burn::tensor::Tensor;
 use gb_core::BackendKind;
-use gb_diffusion::checkpoint::hub::{is_hub_id, resolve_cached};
+use gb_diffusion::checkpoint::hub::{self, is_hub_id};
 use gb_diffusion::checkpoint::{keymap, DiffusersFolder, WeightVariant};
 use gb_diffusion::clip::load_text_encoder;
 use gb_diffusion::lora::{apply_lora, LoraComponent, LoraFile};
@@ -60,9 +60,15 @@ pub struct Args {
     /// Which component to run.
     #[arg(long, value_enum)]
     pub component: Component,
-    /// A diffusers-layout folder, or a hub id (`owner/name[@rev]`) in the hf-hub cache.
+    /// A diffusers-layout folder, or a hub id (`owner/name[@rev]`): taken from the hf-hub
+    /// cache (`$HF_HOME/hub`), else downloaded into it from `--hub-endpoint`.
     #[arg(long)]
     pub model: String,
+    /// Hub to download a hub id from when it is not cached (default: `$HF_ENDPOINT`, else
+    /// https://huggingface.co). The built-in downloader speaks `http://` only (a mirror);
+    /// fetch from huggingface.co itself with `huggingface-cli download ID`.
+    #[arg(long)]
+    pub hub_endpoint: Option<String>,
     /// Inputs: a JSON list of strings for `tokenizer`, a safetensors file otherwise.
     #[arg(long)]
     pub inputs: PathBuf,
@@ -82,7 +88,7 @@ pub struct Args {
 
 /// Runs the command.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let root = resolve_model(&args.model)?;
+    let root = resolve_model(&args.model, args.hub_endpoint.as_deref())?;
     let folder = DiffusersFolder::open(&root)?;
     let device = args.device.unwrap_or_default().device();
     let variant = match args.variant {
@@ -121,14 +127,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A local folder as is; otherwise a hub id resolved in the hf-hub cache.
-fn resolve_model(spec: &str) -> anyhow::Result<PathBuf> {
+/// A local folder as is; otherwise a hub id, from the hf-hub cache or downloaded.
+fn resolve_model(spec: &str, endpoint: Option<&str>) -> anyhow::Result<PathBuf> {
     let path = Path::new(spec);
     if path.is_dir() {
         return Ok(path.to_path_buf());
     }
     if is_hub_id(spec) {
-        return Ok(resolve_cached(spec, None)?);
+        return Ok(hub::resolve(spec, endpoint, None)?);
     }
     bail!("--model {spec}: neither a folder nor a hub id (owner/name)")
 }

@@ -5,15 +5,19 @@
 //! - [`load`]: [`load_module`], which applies `*.safetensors` files to a module through a
 //!   keymap section, checking that every tensor is present and well-shaped.
 //! - [`folder`]: the diffusers folder (`model_index.json`, sub-folders, `.fp16` variants).
-//! - [`hub`]: resolving a hub id to a local folder through the `hf-hub` cache.
+//! - [`save`]: [`save_module`], the inverse: a module to a diffusers-named safetensors file.
+//! - [`hub`]: resolving a hub id to a local folder through the `hf-hub` cache, and
+//!   downloading a pipeline snapshot into that cache from an `http://` endpoint.
 
 pub mod error;
 pub mod folder;
 pub mod hub;
 pub mod keymap;
 pub mod load;
+pub mod save;
 
 pub use error::CheckpointError;
 pub use folder::{DiffusersFolder, WeightVariant};
 pub use keymap::KeymapSection;
 pub use load::{load_module, LoadReport};
+pub use save::save_module;

@@ -1,0 +1,225 @@
+//! A whole fine-tuning run on disk: resume or start, train with a progress bar, checkpoint
+//! atomically, validate against the untouched base and the fill baselines, and export.
+//!
+//! Files under the output folder:
+//! - `checkpoint.gbft`: the latest checkpoint ([`crate::train::checkpoint`]); `resume`
+//!   continues from it exactly;
+//! - `config.toml`: the resolved recipe;
+//! - `train_log.jsonl`: one `{"step", "loss"}` line per completed step (rewritten at each
+//!   checkpoint, so it always matches the checkpoint);
+//! - `validation.jsonl`: one line per validation pass, `{"step", "report"}`; step 0 is the
+//!   base prior without any update;
+//! - LoRA runs: `pytorch_lora_weights.safetensors` (diffusers/PEFT format);
+//!   full runs: `prior/`, a diffusers inpainting folder.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use burn::tensor::Device;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::{Deserialize, Serialize};
+
+use crate::masks::MaskConfig;
+use crate::sample::PairSource;
+use crate::train::validate::{sampling_prior, validate, ValidationReport, ValidationSettings};
+use crate::train::{FinetuneConfig, FinetuneTrainer, PriorModels, TrainTarget};
+use crate::FinetuneError;
+
+/// Where and how a run writes.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// Output folder.
+    pub out: PathBuf,
+    /// Continue from `out/checkpoint.gbft` when it exists.
+    pub resume: bool,
+    /// Show a progress bar.
+    pub progress: bool,
+    /// The VAE config JSON to write with a full-run prior folder.
+    pub vae_config_json: Option<serde_json::Value>,
+}
+
+/// What a run produced.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RunSummary {
+    /// Steps completed.
+    pub steps: usize,
+    /// Mean loss of the first and the last 10% of steps.
+    pub loss_start: f64,
+    /// See `loss_start`.
+    pub loss_end: f64,
+    /// Seconds spent training in this process.
+    pub train_seconds: f64,
+    /// Steps per second in this process.
+    pub steps_per_second: f64,
+    /// Validation of the base (step 0) and of the final model.
+    pub validation_base: Option<ValidationReport>,
+    /// See `validation_base`.
+    pub validation_final: Option<ValidationReport>,
+    /// The exported LoRA file or prior folder.
+    pub export: PathBuf,
+}
+
+/// The checkpoint file of a run folder.
+pub fn checkpoint_path(out: &Path) -> PathBuf {
+    out.join("checkpoint.gbft")
+}
+
+fn write_log(out: &Path, losses: &[f64]) -> Result<(), FinetuneError> {
+    let mut text = String::new();
+    for (i, l) in losses.iter().enumerate() {
+        let loss = if l.is_finite() {
+            serde_json::json!(l)
+        } else {
+            serde_json::Value::Null
+        };
+        text.push_str(&serde_json::json!({"step": i + 1, "loss": loss}).to_string());
+        text.push('\n');
+    }
+    let path = out.join("train_log.jsonl");
+    gb_core::write_atomic(&path, text.as_bytes()).map_err(|e| FinetuneError::io(&path, e))
+}
+
+fn append_validation(
+    out: &Path,
+    step: usize,
+    report: &ValidationReport,
+) -> Result<(), FinetuneError> {
+    let path = out.join("validation.jsonl");
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&path)
+        .map_err(|e| FinetuneError::io(&path, e))?;
+    writeln!(f, "{}", serde_json::json!({"step": step, "report": report}))
+        .map_err(|e| FinetuneError::io(&path, e))
+}
+
+/// Validation settings of a recipe.
+pub fn validation_settings(cfg: &FinetuneConfig) -> ValidationSettings {
+    ValidationSettings {
+        resolution: cfg.resolution,
+        samples: cfg.validation_samples,
+        ddim_steps: cfg.validation_ddim_steps,
+        mode: cfg.mode,
+        normals: !cfg.rgb_only,
+        seed: cfg.seed ^ 0x7661_6c69,
+        mask: MaskConfig {
+            min_coverage: cfg.mask_min_coverage,
+            max_coverage: cfg.mask_max_coverage,
+            ..MaskConfig::default()
+        },
+    }
+}
+
+/// Runs (or resumes) a fine-tuning run. `models` must be loaded on `device` (autodiff);
+/// `plain` is the same backend without autodiff, used for validation sampling.
+pub fn run_finetune(
+    models: PriorModels,
+    config: FinetuneConfig,
+    train: &dyn PairSource,
+    val: Option<&dyn PairSource>,
+    device: &Device,
+    plain: &Device,
+    opts: &RunOptions,
+) -> Result<RunSummary, FinetuneError> {
+    std::fs::create_dir_all(&opts.out).map_err(|e| FinetuneError::io(&opts.out, e))?;
+    let ckpt = checkpoint_path(&opts.out);
+    let settings = validation_settings(&config);
+    let mut validation_base = None;
+    if let (Some(v), false) = (val, opts.resume && ckpt.is_file()) {
+        let prior = sampling_prior(&models, &models.trainable, plain);
+        let report = validate(&prior, v, &settings)?;
+        tracing::info!(?report, "validation of the base prior (step 0)");
+        append_validation(&opts.out, 0, &report)?;
+        validation_base = Some(report);
+    }
+    let mut trainer = if opts.resume && ckpt.is_file() {
+        let t = FinetuneTrainer::resume(models, &ckpt, device)?;
+        if t.config != config {
+            tracing::warn!(
+                "resuming with the checkpoint's recipe, which differs from the one given"
+            );
+        }
+        tracing::info!(step = t.step, "resumed from {}", ckpt.display());
+        t
+    } else {
+        FinetuneTrainer::new(models, config, device)?
+    };
+    let cfg = trainer.config.clone();
+    let toml_text = toml::to_string(&cfg).map_err(|e| FinetuneError::Config {
+        field: "config".into(),
+        message: e.to_string(),
+    })?;
+    let cfg_path = opts.out.join("config.toml");
+    gb_core::write_atomic(&cfg_path, toml_text.as_bytes())
+        .map_err(|e| FinetuneError::io(&cfg_path, e))?;
+
+    let bar = if opts.progress {
+        let b = ProgressBar::new(cfg.steps as u64);
+        b.set_style(
+            ProgressStyle::with_template("{bar:30} {pos}/{len} {per_sec} eta {eta} {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        b.set_position(trainer.step as u64);
+        b
+    } else {
+        ProgressBar::hidden()
+    };
+    let start = std::time::Instant::now();
+    let first = trainer.step;
+    let mut validation_final = None;
+    while trainer.step < cfg.steps {
+        let s = trainer.train_step(train)?;
+        bar.set_position(s.step as u64);
+        bar.set_message(format!("loss {:.4} |g| {:.3}", s.loss, s.grad_norm));
+        let last = s.step == cfg.steps;
+        if last || (cfg.checkpoint_every > 0 && s.step % cfg.checkpoint_every == 0) {
+            trainer.save_checkpoint(&ckpt)?;
+            write_log(&opts.out, &trainer.losses)?;
+        }
+        if let Some(v) = val {
+            if last || (cfg.validate_every > 0 && s.step % cfg.validate_every == 0) {
+                let prior = sampling_prior(&trainer.models, &trainer.models.trainable, plain);
+                let report = validate(&prior, v, &settings)?;
+                tracing::info!(step = s.step, ?report, "validation");
+                append_validation(&opts.out, s.step, &report)?;
+                if last {
+                    validation_final = Some(report);
+                }
+            }
+        }
+    }
+    bar.finish_and_clear();
+    let secs = start.elapsed().as_secs_f64();
+    let done = trainer.step - first;
+    let export = match cfg.target {
+        TrainTarget::Lora => {
+            let path = opts.out.join("pytorch_lora_weights.safetensors");
+            let n = trainer.export_lora(&path)?;
+            tracing::info!(adapters = n, "LoRA written to {}", path.display());
+            path
+        }
+        TrainTarget::Full => {
+            let path = opts.out.join("prior");
+            let vae_json = opts
+                .vae_config_json
+                .clone()
+                .unwrap_or_else(|| serde_json::json!({"_class_name": "AutoencoderKL"}));
+            trainer.models.save_folder(&path, &vae_json)?;
+            path
+        }
+    };
+    let n = trainer.losses.len();
+    let k = (n / 10).max(1);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    Ok(RunSummary {
+        steps: trainer.step,
+        loss_start: mean(&trainer.losses[..k.min(n)]),
+        loss_end: mean(&trainer.losses[n.saturating_sub(k)..]),
+        train_seconds: secs,
+        steps_per_second: if secs > 0.0 { done as f64 / secs } else { 0.0 },
+        validation_base,
+        validation_final,
+        export,
+    })
+}

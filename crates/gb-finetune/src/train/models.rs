@@ -1,0 +1,244 @@
+//! The networks a fine-tuning run touches, loaded from a diffusers folder, built fresh from
+//! config files (training from scratch), and written back as a diffusers folder.
+
+use std::path::{Path, PathBuf};
+
+use burn::module::Module;
+use burn::tensor::{Device, Int, Tensor};
+
+use gb_diffusion::checkpoint::{keymap, save_module, DiffusersFolder, WeightVariant};
+use gb_diffusion::clip::text_model::{load_text_encoder, ClipTextModel};
+use gb_diffusion::config::{
+    AutoencoderKLConfig, ClipTextConfig, SchedulerConfig, UNet2DConditionConfig,
+};
+use gb_diffusion::models::{load_unet, load_vae, AutoencoderKL, UNet2DConditionModel};
+use gb_diffusion::scheduler::betas;
+use gb_diffusion::tokenizer::ClipTokenizer;
+
+use crate::FinetuneError;
+
+/// The trainable pair: a U-Net and a text encoder in one module, so that one optimiser,
+/// one record and one gradient clip cover both.
+#[derive(Module, Debug)]
+pub struct Trainable {
+    /// The 9-channel inpainting U-Net.
+    pub unet: UNet2DConditionModel,
+    /// The CLIP text encoder.
+    pub text_encoder: ClipTextModel,
+}
+
+/// Every component of an inpainting prior that fine-tuning needs.
+pub struct PriorModels {
+    /// CLIP tokenizer.
+    pub tokenizer: ClipTokenizer,
+    /// U-Net and text encoder (on the training device, which may be an autodiff device).
+    pub trainable: Trainable,
+    /// The frozen VAE (its encoder makes latents and masked-image latents).
+    pub vae: AutoencoderKL,
+    /// U-Net config (kept to write the folder back).
+    pub unet_config: UNet2DConditionConfig,
+    /// VAE image-to-latent factor.
+    pub vae_factor: usize,
+    /// Scheduler config of the prior.
+    pub scheduler: SchedulerConfig,
+    /// `alphas_cumprod[t]` of the training schedule.
+    pub alphas_cumprod: Vec<f64>,
+    /// The folder the prior came from (configs and tokenizer are copied from it on save).
+    pub source: PathBuf,
+}
+
+fn diffusion(context: &str, path: &Path) -> impl Fn(String) -> FinetuneError {
+    let context = format!("{context} ({})", path.display());
+    move |message| FinetuneError::Diffusion {
+        context: context.clone(),
+        message,
+    }
+}
+
+/// `alphas_cumprod` of a scheduler config.
+pub fn alphas_cumprod(cfg: &SchedulerConfig) -> Vec<f64> {
+    let mut acc = 1.0;
+    betas(cfg)
+        .into_iter()
+        .map(|b| {
+            acc *= 1.0 - b;
+            acc
+        })
+        .collect()
+}
+
+fn scheduler_of(root: &Path) -> Result<SchedulerConfig, FinetuneError> {
+    let path = root.join("scheduler").join("scheduler_config.json");
+    if path.is_file() {
+        SchedulerConfig::from_file(&path)
+            .map_err(|e| diffusion("scheduler config", &path)(e.to_string()))
+    } else {
+        Ok(SchedulerConfig::default())
+    }
+}
+
+impl PriorModels {
+    /// Loads tokenizer, text encoder, U-Net, VAE and scheduler of a diffusers inpainting
+    /// folder onto `device` (use an autodiff device to train).
+    pub fn load(root: &Path, device: &Device) -> Result<Self, FinetuneError> {
+        let folder = DiffusersFolder::open(root)
+            .map_err(|e| diffusion("prior folder", root)(e.to_string()))?;
+        let tok_dir = folder
+            .component_dir("tokenizer")
+            .map_err(|e| diffusion("tokenizer", root)(e.to_string()))?;
+        let tokenizer = ClipTokenizer::from_dir(&tok_dir)
+            .map_err(|e| diffusion("tokenizer", &tok_dir)(e.to_string()))?;
+        let text_encoder = load_text_encoder(&folder, WeightVariant::Auto, device)
+            .map_err(|e| diffusion("text encoder", root)(e.to_string()))?;
+        let (unet, unet_config) =
+            load_unet(root, device).map_err(|e| diffusion("unet", root)(e.to_string()))?;
+        if unet_config.in_channels != 9 {
+            return Err(FinetuneError::Invalid {
+                path: root.join("unet").join("config.json"),
+                message: format!(
+                    "in_channels = {}; fine-tuning needs an inpainting U-Net with 9 \
+                     (noisy latent 4 + mask 1 + masked-image latent 4)",
+                    unet_config.in_channels
+                ),
+            });
+        }
+        let (vae, vae_config) =
+            load_vae(root, device).map_err(|e| diffusion("vae", root)(e.to_string()))?;
+        let scheduler = scheduler_of(root)?;
+        Ok(Self {
+            tokenizer,
+            trainable: Trainable { unet, text_encoder },
+            vae: vae.no_grad(),
+            unet_config,
+            vae_factor: vae_config.scale_factor(),
+            alphas_cumprod: alphas_cumprod(&scheduler),
+            scheduler,
+            source: root.to_path_buf(),
+        })
+    }
+
+    /// Builds freshly initialised networks from the config files of a diffusers-layout
+    /// recipe folder (`unet/config.json`, `text_encoder/config.json`, `tokenizer/`,
+    /// `scheduler/`), with the VAE taken from `vae` (a trained autoencoder). Burn's default
+    /// initialisers are seeded from the device RNG (`device.seed`).
+    pub fn from_scratch(
+        recipe: &Path,
+        vae: AutoencoderKL,
+        vae_config: &AutoencoderKLConfig,
+        device: &Device,
+    ) -> Result<Self, FinetuneError> {
+        let unet_path = recipe.join("unet").join("config.json");
+        let unet_config = UNet2DConditionConfig::from_file(&unet_path)
+            .map_err(|e| diffusion("unet config", &unet_path)(e.to_string()))?;
+        let text_path = recipe.join("text_encoder").join("config.json");
+        let text =
+            std::fs::read_to_string(&text_path).map_err(|e| FinetuneError::io(&text_path, e))?;
+        let text_config: ClipTextConfig =
+            serde_json::from_str(&text).map_err(|e| FinetuneError::Invalid {
+                path: text_path.clone(),
+                message: e.to_string(),
+            })?;
+        let tok_dir = recipe.join("tokenizer");
+        let tokenizer = ClipTokenizer::from_dir(&tok_dir)
+            .map_err(|e| diffusion("tokenizer", &tok_dir)(e.to_string()))?;
+        let scheduler = scheduler_of(recipe)?;
+        Ok(Self {
+            tokenizer,
+            trainable: Trainable {
+                unet: UNet2DConditionModel::new(&unet_config, device),
+                text_encoder: ClipTextModel::new(&text_config, device),
+            },
+            vae: vae.no_grad(),
+            unet_config,
+            vae_factor: vae_config.scale_factor(),
+            alphas_cumprod: alphas_cumprod(&scheduler),
+            scheduler,
+            source: recipe.to_path_buf(),
+        })
+    }
+
+    /// Token ids `[n, 77]` of `prompts`.
+    pub fn token_ids(
+        &self,
+        prompts: &[String],
+        device: &Device,
+    ) -> Result<Tensor<2, Int>, FinetuneError> {
+        let mut rows = Vec::with_capacity(prompts.len());
+        for p in prompts {
+            let ids = self
+                .tokenizer
+                .encode(p)
+                .map_err(|e| FinetuneError::diffusion(format!("tokenizing {p:?}"), e))?;
+            rows.push(ids.into_iter().map(i64::from).collect::<Vec<i64>>());
+        }
+        self.trainable
+            .text_encoder
+            .ids_tensor(&rows, device)
+            .map_err(|e| FinetuneError::diffusion("text encoder ids", e))
+    }
+
+    /// Writes the prior as a diffusers inpainting folder at `out`: `model_index.json`,
+    /// `unet/`, `text_encoder/`, `vae/` (weights as `*.safetensors`, configs and tokenizer
+    /// copied from the source folder, `vae/config.json` with `vae_scaling_factor` when
+    /// given) and `scheduler/`. LoRA adapters must be merged first.
+    pub fn save_folder(
+        &self,
+        out: &Path,
+        vae_config_json: &serde_json::Value,
+    ) -> Result<(), FinetuneError> {
+        let src = &self.source;
+        for dir in ["unet", "text_encoder", "vae", "tokenizer", "scheduler"] {
+            std::fs::create_dir_all(out.join(dir))
+                .map_err(|e| FinetuneError::io(out.join(dir), e))?;
+        }
+        let copy = |rel: &str| -> Result<(), FinetuneError> {
+            let from = src.join(rel);
+            if from.is_file() {
+                std::fs::copy(&from, out.join(rel)).map_err(|e| FinetuneError::io(&from, e))?;
+            }
+            Ok(())
+        };
+        for rel in [
+            "model_index.json",
+            "unet/config.json",
+            "text_encoder/config.json",
+            "scheduler/scheduler_config.json",
+            "tokenizer/vocab.json",
+            "tokenizer/merges.txt",
+            "tokenizer/tokenizer_config.json",
+            "tokenizer/special_tokens_map.json",
+        ] {
+            copy(rel)?;
+        }
+        let vae_json =
+            serde_json::to_string_pretty(vae_config_json).map_err(|e| FinetuneError::Invalid {
+                path: out.join("vae/config.json"),
+                message: e.to_string(),
+            })?;
+        gb_core::write_atomic(&out.join("vae/config.json"), vae_json.as_bytes())
+            .map_err(|e| FinetuneError::io(out.join("vae/config.json"), e))?;
+        let unet_section = if self.unet_config.use_linear_projection {
+            keymap::UNET_LINEAR_PROJECTION
+        } else {
+            keymap::UNET
+        };
+        let save = |m: &dyn Fn(&Path) -> Result<(), gb_diffusion::checkpoint::CheckpointError>,
+                    rel: &str| {
+            let path = out.join(rel);
+            m(&path).map_err(|e| diffusion("writing weights", &path)(e.to_string()))
+        };
+        save(
+            &|p| save_module(&self.trainable.unet, p, &unet_section),
+            "unet/diffusion_pytorch_model.safetensors",
+        )?;
+        save(
+            &|p| save_module(&self.trainable.text_encoder, p, &keymap::TEXT_ENCODER),
+            "text_encoder/model.safetensors",
+        )?;
+        save(
+            &|p| save_module(&self.vae, p, &keymap::VAE),
+            "vae/diffusion_pytorch_model.safetensors",
+        )?;
+        Ok(())
+    }
+}

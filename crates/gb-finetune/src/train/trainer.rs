@@ -1,0 +1,297 @@
+//! [`FinetuneTrainer`]: AdamW over LoRA adapters (or every weight), gradient accumulation,
+//! global-norm clipping, NaN-safe steps, atomic checkpoints with the optimiser state, an
+//! exact resume, and the LoRA export in the diffusers/PEFT format.
+
+use std::path::Path;
+
+use burn::module::{Lora, Module, ParamGroup};
+use burn::optim::{AdamWConfig, GradientsAccumulator, GradientsParams, ModuleOptimizer};
+use burn::store::ModuleRecord;
+use burn::tensor::{Bytes, Device};
+
+use gb_diffusion::checkpoint::keymap;
+use gb_diffusion::lora::{collect_lora, write_peft_lora, LoraComponent, LoraExport};
+
+use super::batch::make_batch;
+use super::checkpoint::{self, CheckpointMeta, CheckpointParts};
+use super::grad_clip::clip_global_norm;
+use super::loss::inpainting_loss;
+use super::models::{PriorModels, Trainable};
+use super::{FinetuneConfig, TrainTarget};
+use crate::sample::PairSource;
+use crate::FinetuneError;
+
+/// Regex of the U-Net weights that get LoRA adapters: the attention projections of every
+/// transformer block (diffusers' `target_modules = ["to_k", "to_q", "to_v", "to_out.0"]`).
+pub const UNET_LORA_TARGETS: &str = r"^unet\..*\.(to_q|to_k|to_v|to_out\.0)\.weight$";
+/// Regex of the text-encoder weights that get LoRA adapters (`q/k/v/out_proj`).
+pub const TEXT_LORA_TARGETS: &str = r"^text_encoder\..*\.(q_proj|k_proj|v_proj|out_proj)\.weight$";
+/// Consecutive non-finite steps after which a run stops.
+pub const MAX_NAN_STEPS: usize = 5;
+
+/// What one optimiser step did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepStats {
+    /// The step just completed (1-based).
+    pub step: usize,
+    /// Mean loss over the micro-batches.
+    pub loss: f64,
+    /// Global gradient norm before clipping.
+    pub grad_norm: f64,
+    /// Whether the update was skipped (non-finite loss or gradient).
+    pub skipped: bool,
+}
+
+/// A fine-tuning run in memory.
+pub struct FinetuneTrainer {
+    /// The prior; `models.trainable` carries the adapters and lives on `device`.
+    pub models: PriorModels,
+    /// The recipe.
+    pub config: FinetuneConfig,
+    /// Optimiser steps completed.
+    pub step: usize,
+    /// Loss of each completed step.
+    pub losses: Vec<f64>,
+    optimizer: ModuleOptimizer,
+    device: Device,
+    nan_streak: usize,
+}
+
+fn optimizer(cfg: &FinetuneConfig) -> ModuleOptimizer {
+    AdamWConfig::new()
+        .with_weight_decay(cfg.weight_decay)
+        .with_epsilon(1e-8)
+        .init()
+}
+
+/// Attaches fresh LoRA adapters (rank, alpha of `cfg`) to the attention projections of the
+/// U-Net and, when `cfg.train_text_encoder`, of the text encoder. Every base weight is frozen.
+/// The `A` factors are drawn from the device RNG, seeded with `cfg.seed` first.
+pub fn attach_lora(
+    trainable: Trainable,
+    cfg: &FinetuneConfig,
+    device: &Device,
+) -> Result<Trainable, FinetuneError> {
+    let mut patterns = vec![UNET_LORA_TARGETS.to_string()];
+    if cfg.train_text_encoder {
+        patterns.push(TEXT_LORA_TARGETS.to_string());
+    }
+    let group = ParamGroup::from_regex(patterns.join("|")).map_err(|e| FinetuneError::Config {
+        field: "lora targets".into(),
+        message: format!("{e:?}"),
+    })?;
+    device.seed(cfg.seed);
+    Ok(trainable.apply_lora(Lora::new(cfg.rank, cfg.alpha).set_param_group(group)))
+}
+
+impl FinetuneTrainer {
+    /// Starts a run: attaches LoRA adapters (LoRA target) or unfreezes the networks (full
+    /// target; the text encoder stays frozen unless `train_text_encoder`). `models` must
+    /// live on `device`, an autodiff device.
+    pub fn new(
+        mut models: PriorModels,
+        config: FinetuneConfig,
+        device: &Device,
+    ) -> Result<Self, FinetuneError> {
+        config.validate()?;
+        let latent = config.resolution / models.vae_factor;
+        let down = 1usize
+            << models
+                .unet_config
+                .block_out_channels
+                .len()
+                .saturating_sub(1);
+        if !config.resolution.is_multiple_of(models.vae_factor) || !latent.is_multiple_of(down) {
+            return Err(FinetuneError::Config {
+                field: "resolution".into(),
+                message: format!(
+                    "{} must be a multiple of the VAE factor {} times the U-Net's down-sampling {down}",
+                    config.resolution, models.vae_factor
+                ),
+            });
+        }
+        models.trainable = match config.target {
+            TrainTarget::Lora => attach_lora(models.trainable, &config, device)?,
+            TrainTarget::Full => {
+                let t = models.trainable;
+                if config.train_text_encoder {
+                    t
+                } else {
+                    Trainable {
+                        unet: t.unet,
+                        text_encoder: t.text_encoder.no_grad(),
+                    }
+                }
+            }
+        };
+        Ok(Self {
+            models,
+            optimizer: optimizer(&config),
+            config,
+            step: 0,
+            losses: Vec::new(),
+            device: device.clone(),
+            nan_streak: 0,
+        })
+    }
+
+    /// One optimiser step: `grad_accum` micro-batches, global-norm clip, AdamW update. A
+    /// non-finite loss or gradient skips the update (logged); [`MAX_NAN_STEPS`] in a row
+    /// stop the run with [`FinetuneError::Diverged`].
+    pub fn train_step(&mut self, source: &dyn PairSource) -> Result<StepStats, FinetuneError> {
+        let cfg = &self.config;
+        let latent = cfg.resolution / self.models.vae_factor;
+        let schedule = self.models.alphas_cumprod.len();
+        let train_text = cfg.train_text_encoder;
+        let mut accum = GradientsAccumulator::<Trainable>::new();
+        let mut loss_sum = 0.0;
+        for micro in 0..cfg.grad_accum {
+            let batch = make_batch(source, cfg, self.step, micro, latent, schedule)?;
+            let loss = inpainting_loss(
+                &self.models,
+                &self.models.trainable,
+                &batch,
+                &self.device,
+                train_text,
+            )?;
+            loss_sum += loss.clone().into_scalar::<f64>();
+            let loss = loss.div_scalar(cfg.grad_accum as f64);
+            let grads = GradientsParams::from_grads(loss.backward(), &self.models.trainable);
+            accum.accumulate(&self.models.trainable, grads);
+        }
+        let loss = loss_sum / cfg.grad_accum as f64;
+        let mut grads = accum.grads();
+        let norm = clip_global_norm(&self.models.trainable, &mut grads, cfg.clip_grad_norm);
+        self.step += 1;
+        let skipped = !(loss.is_finite() && norm.is_finite());
+        if skipped {
+            self.nan_streak += 1;
+            tracing::warn!(
+                step = self.step,
+                loss,
+                grad_norm = norm,
+                "non-finite step skipped"
+            );
+            if self.nan_streak >= MAX_NAN_STEPS {
+                return Err(FinetuneError::Diverged {
+                    step: self.step,
+                    message: format!(
+                        "{MAX_NAN_STEPS} consecutive non-finite losses or gradients \
+                         (last loss {loss}, gradient norm {norm}); lower the learning rate \
+                         or resume from the last checkpoint"
+                    ),
+                });
+            }
+        } else {
+            self.nan_streak = 0;
+            let t = self.models.trainable.clone();
+            self.models.trainable = self.optimizer.step(cfg.lr, t, grads);
+        }
+        self.losses.push(loss);
+        Ok(StepStats {
+            step: self.step,
+            loss,
+            grad_norm: norm,
+            skipped,
+        })
+    }
+
+    /// Writes a checkpoint atomically (module record with ids, AdamW state, step, losses).
+    pub fn save_checkpoint(&self, path: &Path) -> Result<(), FinetuneError> {
+        let bad = |m: String| FinetuneError::Invalid {
+            path: path.to_path_buf(),
+            message: m,
+        };
+        let model = self
+            .models
+            .trainable
+            .clone()
+            .into_record()
+            .into_bytes()
+            .map_err(|e| bad(format!("model record: {e}")))?;
+        let optimizer = self
+            .optimizer
+            .into_bytes()
+            .map_err(|e| bad(format!("optimizer record: {e}")))?;
+        checkpoint::save(
+            path,
+            &CheckpointParts {
+                meta: CheckpointMeta {
+                    step: self.step,
+                    config: self.config.clone(),
+                    losses: self.losses.clone(),
+                },
+                model: model.to_vec(),
+                optimizer: optimizer.to_vec(),
+            },
+        )
+    }
+
+    /// Continues a run from a checkpoint: `models` must be the same base prior (loaded
+    /// fresh); the adapters, the optimiser state, the step and the loss log are restored,
+    /// and the random stream of the next step is the one an uninterrupted run would draw.
+    pub fn resume(
+        models: PriorModels,
+        path: &Path,
+        device: &Device,
+    ) -> Result<Self, FinetuneError> {
+        let parts = checkpoint::load(path)?;
+        let bad = |m: String| FinetuneError::Invalid {
+            path: path.to_path_buf(),
+            message: m,
+        };
+        let mut t = Self::new(models, parts.meta.config.clone(), device)?;
+        let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(parts.model))
+            .map_err(|e| bad(format!("model record: {e}")))?;
+        t.models.trainable = t
+            .models
+            .trainable
+            .clone()
+            .try_load_record(record)
+            .map_err(|e| bad(format!("model record does not fit this prior: {e}")))?;
+        t.optimizer = optimizer(&t.config)
+            .from_bytes(Bytes::from_bytes_vec(parts.optimizer))
+            .map_err(|e| bad(format!("optimizer record: {e}")))?;
+        t.step = parts.meta.step;
+        t.losses = parts.meta.losses;
+        Ok(t)
+    }
+
+    /// Writes the adapters as a diffusers/PEFT LoRA file (`unet.*` and `text_encoder.*`
+    /// keys, `lora_A`/`lora_B`, alpha metadata) that diffusers' `load_lora_weights` and
+    /// [`gb_diffusion::lora`] read.
+    pub fn export_lora(&self, path: &Path) -> Result<usize, FinetuneError> {
+        let err = |e: gb_diffusion::lora::LoraError| {
+            FinetuneError::diffusion(format!("LoRA export to {}", path.display()), e)
+        };
+        let unet_section = if self.models.unet_config.use_linear_projection {
+            keymap::UNET_LINEAR_PROJECTION
+        } else {
+            keymap::UNET
+        };
+        let unet = collect_lora(&self.models.trainable.unet).map_err(err)?;
+        let text = collect_lora(&self.models.trainable.text_encoder).map_err(err)?;
+        let count = unet.len() + text.len();
+        let mut exports = vec![LoraExport {
+            component: LoraComponent::Unet,
+            section: &unet_section,
+            factors: unet,
+            alpha: self.config.alpha,
+        }];
+        if !text.is_empty() {
+            exports.push(LoraExport {
+                component: LoraComponent::TextEncoder,
+                section: &keymap::TEXT_ENCODER,
+                factors: text,
+                alpha: self.config.alpha,
+            });
+        }
+        write_peft_lora(path, &exports).map_err(err)?;
+        Ok(count)
+    }
+
+    /// The device the run trains on.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+}

@@ -1,0 +1,237 @@
+//! `cargo xtask finetune`: the geometric prior (GB-NeRF's LoRA on RGB / normal pairs), and
+//! the tiny built-in prior's recipe.
+//!
+//! - `--diode DIR --base MODEL`: LoRA fine-tuning on a DIODE-layout folder (`val/` is the
+//!   held-out set when present);
+//! - `--synthetic --base MODEL`: the same on procedural RGB / normal pairs;
+//! - `--pairs DIR --base MODEL`: on a folder written by `cargo xtask scene --pairs`;
+//! - `--synthetic --from-scratch [--recipe configs/tiny-prior]`: the tiny prior's whole
+//!   recipe (autoencoder, base prior from scratch, LoRA), into `--out`.
+//!
+//! Outputs (see `gb_finetune::run`): `checkpoint.gbft` (`--resume` continues exactly),
+//! `config.toml`, `train_log.jsonl`, `validation.jsonl`, `pytorch_lora_weights.safetensors`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use gb_core::BackendKind;
+use gb_diffusion::checkpoint::hub;
+use gb_finetune::captions::CaptionMode;
+use gb_finetune::diode::{DiodeDataset, DiodeSplit};
+use gb_finetune::run::{run_finetune, RunOptions};
+use gb_finetune::sample::PairSource;
+use gb_finetune::synthetic::SyntheticPairs;
+use gb_finetune::tiny_prior::run_recipe;
+use gb_finetune::train::{FinetuneConfig, PriorModels};
+
+/// Arguments of `cargo xtask finetune`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// DIODE folder (`train/` and optionally `val/`, each `{indoors,outdoor}/scene_*/scan_*/`).
+    #[arg(long, conflicts_with_all = ["synthetic", "pairs"])]
+    pub diode: Option<PathBuf>,
+    /// Use procedural RGB / normal pairs (stairs and fence, seeds 1-6; held out: 101-102).
+    #[arg(long)]
+    pub synthetic: bool,
+    /// A folder of pairs written by `cargo xtask scene --pairs` (`captions.jsonl`).
+    #[arg(long, conflicts_with = "synthetic")]
+    pub pairs: Option<PathBuf>,
+    /// Base inpainting prior: a diffusers folder, a hub id, or `tiny` (the built-in prior).
+    #[arg(long)]
+    pub base: Option<String>,
+    /// Run the tiny prior's recipe from scratch (needs `--synthetic`).
+    #[arg(long, requires = "synthetic")]
+    pub from_scratch: bool,
+    /// Recipe folder for `--from-scratch`.
+    #[arg(long, default_value = "configs/tiny-prior")]
+    pub recipe: PathBuf,
+    /// JSONL captions (`{"image": ..., "caption": ...}`) for DIODE images.
+    #[arg(long)]
+    pub captions: Option<PathBuf>,
+    /// Prompt mode: captions (default), identifiers, normal-only.
+    #[arg(long)]
+    pub mode: Option<CaptionMode>,
+    /// A TOML file with any `FinetuneConfig` fields (flags below override it).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Optimiser steps.
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Images per micro-batch.
+    #[arg(long)]
+    pub batch: Option<usize>,
+    /// Micro-batches per step.
+    #[arg(long)]
+    pub grad_accum: Option<usize>,
+    /// Learning rate.
+    #[arg(long)]
+    pub lr: Option<f64>,
+    /// LoRA rank.
+    #[arg(long)]
+    pub rank: Option<usize>,
+    /// LoRA alpha.
+    #[arg(long)]
+    pub alpha: Option<f64>,
+    /// Training resolution (default: the prior's native resolution).
+    #[arg(long)]
+    pub resolution: Option<usize>,
+    /// Seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// No LoRA on the text encoder.
+    #[arg(long)]
+    pub no_text_encoder: bool,
+    /// Checkpoint every N steps.
+    #[arg(long)]
+    pub checkpoint_every: Option<usize>,
+    /// Validate every N steps (0: at the end only).
+    #[arg(long)]
+    pub validate_every: Option<usize>,
+    /// Held-out samples per validation.
+    #[arg(long)]
+    pub validation_samples: Option<usize>,
+    /// Compute backend: ndarray, flex or wgpu.
+    #[arg(long, default_value = "flex")]
+    pub device: BackendKind,
+    /// Output folder.
+    #[arg(long, default_value = "out/finetune")]
+    pub out: PathBuf,
+    /// Continue from OUT/checkpoint.gbft.
+    #[arg(long)]
+    pub resume: bool,
+    /// Hide the progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// The folder of a `--base`/`--prior` argument: `tiny`, a local folder, or a hub id.
+pub fn resolve_prior(spec: &str) -> anyhow::Result<PathBuf> {
+    if spec == "tiny" {
+        let dir = gb_core::tiny_prior_dir();
+        if !dir.join("model_index.json").is_file() {
+            bail!(
+                "the built-in prior is missing at {} (reproduce it with `cargo xtask finetune --synthetic --from-scratch --out out/tiny` and copy out/tiny/prior there)",
+                dir.display()
+            );
+        }
+        return Ok(dir);
+    }
+    let path = Path::new(spec);
+    if path.exists() {
+        return Ok(path.to_path_buf());
+    }
+    if hub::is_hub_id(spec) {
+        return hub::resolve(spec, None, None).with_context(|| format!("prior `{spec}`"));
+    }
+    bail!("prior `{spec}`: no such folder, and not a hub id (owner/name)")
+}
+
+fn config_of(args: &Args, native: usize) -> anyhow::Result<FinetuneConfig> {
+    let mut cfg = match &args.config {
+        Some(p) => {
+            let text =
+                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            FinetuneConfig::from_toml(&text, p)?
+        }
+        None => FinetuneConfig {
+            resolution: native,
+            ..FinetuneConfig::default()
+        },
+    };
+    if let Some(v) = args.mode {
+        cfg.mode = v;
+    }
+    macro_rules! set {
+        ($($f:ident),*) => { $( if let Some(v) = args.$f { cfg.$f = v; } )* };
+    }
+    set!(
+        steps,
+        batch,
+        grad_accum,
+        lr,
+        rank,
+        alpha,
+        resolution,
+        seed,
+        checkpoint_every,
+        validate_every,
+        validation_samples
+    );
+    if args.no_text_encoder {
+        cfg.train_text_encoder = false;
+    }
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let device = args.device.autodiff_device();
+    let plain = args.device.device();
+    if args.from_scratch {
+        let summary = run_recipe(
+            &args.recipe,
+            &args.out,
+            &device,
+            &plain,
+            args.resume,
+            !args.quiet,
+        )?;
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+        return Ok(());
+    }
+    let base = args
+        .base
+        .as_deref()
+        .context("--base MODEL is required (a diffusers inpainting folder, a hub id, or `tiny`)")?;
+    let base_dir = resolve_prior(base)?;
+    let (train, val): (Box<dyn PairSource>, Option<Box<dyn PairSource>>) =
+        if let Some(d) = &args.diode {
+            let train = DiodeDataset::open(d, DiodeSplit::Train, args.captions.as_deref())?;
+            let val = if d.join("val").is_dir() {
+                Some(Box::new(DiodeDataset::open(
+                    d,
+                    DiodeSplit::Val,
+                    args.captions.as_deref(),
+                )?) as Box<dyn PairSource>)
+            } else {
+                None
+            };
+            (Box::new(train), val)
+        } else if args.synthetic {
+            let (train, val) = default_synthetic()?;
+            (Box::new(train), Some(Box::new(val)))
+        } else if let Some(p) = &args.pairs {
+            (Box::new(SyntheticPairs::open(p)?), None)
+        } else {
+            bail!("choose the data: --diode DIR, --synthetic or --pairs DIR");
+        };
+    let models = PriorModels::load(&base_dir, &device)?;
+    let native = models.unet_config.sample_size.unwrap_or(64) * models.vae_factor;
+    let cfg = config_of(&args, native)?;
+    let summary = run_finetune(
+        models,
+        cfg,
+        train.as_ref(),
+        val.as_deref(),
+        &device,
+        &plain,
+        &RunOptions {
+            out: args.out.clone(),
+            resume: args.resume,
+            progress: !args.quiet,
+            vae_config_json: None,
+        },
+    )?;
+    println!("{}", serde_json::to_string_pretty(&summary)?);
+    Ok(())
+}
+
+/// The procedural pairs `--synthetic` trains and validates on.
+pub fn default_synthetic() -> anyhow::Result<(SyntheticPairs, SyntheticPairs)> {
+    let scenes = ["stairs", "fence"];
+    Ok((
+        SyntheticPairs::generate(&scenes, &[1, 2, 3, 4, 5, 6], 96, 72)?,
+        SyntheticPairs::generate(&scenes, &[101, 102], 96, 72)?,
+    ))
+}
