@@ -128,8 +128,8 @@ fn finetune_on_a_diode_folder_trains_exports_and_resumes() {
     assert!(base["normal_angular_error_deg"].as_f64().unwrap() >= 0.0);
 
     let mut args = common.to_vec();
-    args.extend(["--steps", "2", "--resume"]);
-    // the checkpoint's recipe (2 steps) is complete: resuming does no more steps
+    args.extend(["--steps", "3", "--resume"]);
+    // resuming may extend the run: one more step, continued from the checkpoint
     let again = xtask(&args);
     assert!(
         again.status.success(),
@@ -137,7 +137,13 @@ fn finetune_on_a_diode_folder_trains_exports_and_resumes() {
         String::from_utf8_lossy(&again.stderr)
     );
     let summary: serde_json::Value = serde_json::from_slice(&again.stdout).unwrap();
-    assert_eq!(summary["steps"].as_u64(), Some(2));
+    assert_eq!(summary["steps"].as_u64(), Some(3));
+    let log2 = std::fs::read_to_string(out.join("train_log.jsonl")).unwrap();
+    assert_eq!(log2.lines().count(), 3);
+    assert!(
+        log2.starts_with(log.as_str()),
+        "the first two steps were rewritten:\n{log}\n{log2}"
+    );
 }
 
 #[test]

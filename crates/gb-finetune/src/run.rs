@@ -134,10 +134,22 @@ pub fn run_finetune(
         validation_base = Some(report);
     }
     let mut trainer = if opts.resume && ckpt.is_file() {
-        let t = FinetuneTrainer::resume(models, &ckpt, device)?;
-        if t.config != config {
+        let mut t = FinetuneTrainer::resume(models, &ckpt, device)?;
+        // `steps` and the checkpoint / validation cadence may change on resume (to extend a
+        // run); any other difference would break the exact continuation, so the
+        // checkpoint's recipe wins.
+        let mut same = config.clone();
+        same.steps = t.config.steps;
+        same.checkpoint_every = t.config.checkpoint_every;
+        same.validate_every = t.config.validate_every;
+        if same == t.config {
+            t.config.steps = config.steps.max(t.step);
+            t.config.checkpoint_every = config.checkpoint_every;
+            t.config.validate_every = config.validate_every;
+        } else if t.config != config {
             tracing::warn!(
-                "resuming with the checkpoint's recipe, which differs from the one given"
+                "resuming with the checkpoint's recipe, which differs from the one given \
+                 (only steps, checkpoint_every and validate_every may change on resume)"
             );
         }
         tracing::info!(step = t.step, "resumed from {}", ckpt.display());

@@ -21,8 +21,9 @@ pub struct CheckpointMeta {
     pub step: usize,
     /// The recipe trained with.
     pub config: FinetuneConfig,
-    /// Loss of every completed step (for the training log).
-    pub losses: Vec<f64>,
+    /// Loss of every completed step (for the training log), as `f64::to_bits`: a JSON
+    /// decimal does not round-trip exactly through serde_json's default float parser.
+    pub loss_bits: Vec<u64>,
 }
 
 /// The parts of a checkpoint.

@@ -219,7 +219,7 @@ impl FinetuneTrainer {
                 meta: CheckpointMeta {
                     step: self.step,
                     config: self.config.clone(),
-                    losses: self.losses.clone(),
+                    loss_bits: self.losses.iter().map(|l| l.to_bits()).collect(),
                 },
                 model: model.to_vec(),
                 optimizer: optimizer.to_vec(),
@@ -253,7 +253,12 @@ impl FinetuneTrainer {
             .from_bytes(Bytes::from_bytes_vec(parts.optimizer))
             .map_err(|e| bad(format!("optimizer record: {e}")))?;
         t.step = parts.meta.step;
-        t.losses = parts.meta.losses;
+        t.losses = parts
+            .meta
+            .loss_bits
+            .iter()
+            .map(|b| f64::from_bits(*b))
+            .collect();
         Ok(t)
     }
 
