@@ -1,1 +1,33 @@
-//! gb-inpaint: The GB-NeRF pipeline: NeRF reconstruction with BSD appearance and geometry guidance.
+//! gb-inpaint: the GB-NeRF pipeline. A NeRF is reconstructed from the unmasked pixels of the
+//! training views while a Stable Diffusion inpainting prior (optionally with the RGB / normal
+//! LoRA of the paper) guides what fills the hole, through score distillation on RGB renders
+//! and on normal maps:
+//!
+//! `L = L_rgb(unmasked) + 0.1 L_depth(unmasked) + lambda_rgb L_rgb_guidance(mask) + lambda_normal L_normal_guidance(mask)`
+//!
+//! - [`method`]: the method configurations (`configs/methods/*.toml`: gb-nerf, bsd,
+//!   mvip-nerf, spin-nerf-sds, csd, none, pre-inpainted), prompts, and how lambda maps to
+//!   the paper's scale;
+//! - [`prior`]: loading the prior folder and attaching a LoRA;
+//! - [`crop`]: the mask's bounding-box crop, rendered at the prior's resolution (RGB, pasted
+//!   on the ground truth or not) and as a normal map;
+//! - [`guidance`]: one guidance term injected as `lambda * s(t) * (z * g.detach()).sum()`;
+//! - [`trainer`]: the guided trainer (one backward per step, NaN policy, checkpoints,
+//!   resume, `train_log.jsonl`);
+//! - [`pre_inpainted`]: the SPIn-NeRF + LaMa baseline's inputs.
+//!
+//! The command line is `cargo xtask inpaint` (xtask/src/cmd/inpaint.rs).
+
+pub mod crop;
+pub mod error;
+pub mod guidance;
+pub mod method;
+pub mod pre_inpainted;
+pub mod prior;
+pub mod trainer;
+
+pub use error::InpaintError;
+pub use guidance::Modality;
+pub use method::{MethodConfig, PromptOverrides, Prompts, SceneCaptions};
+pub use prior::{lora_for, GuidancePrior, PriorInfo};
+pub use trainer::{FitOptions, FitSummary, GuidedTrainer, StepRecord, TermRecord};

@@ -1,0 +1,698 @@
+//! Method configurations (`configs/methods/*.toml`, embedded at build time): which guidance
+//! runs on RGB renders and on normal maps, with which weights, prompts and schedule.
+//!
+//! ```toml
+//! name = "gb-nerf"
+//! use_lora = true                  # attach the prior's RGB/normal LoRA
+//! lambda_rgb = 1e-4                # paper: lambda2
+//! lambda_normal = 1e-4             # paper: lambda3
+//! normal_start_step = 500          # the reference's start of the normal guidance ...
+//! reference_steps = 10000          # ... out of its 10k steps; scaled to the run's steps
+//! guide_every = 1                  # guidance every k steps
+//! prior_input = "paste_on_ground_truth"   # or "render_only"
+//!
+//! [prompts]                        # {caption} / {object_caption}: from the scene
+//! appearance = "RGB image, {caption}"
+//! negative = "RGB image, {object_caption}"
+//! geometry = "normal map, {caption}"
+//! geometry_negative = "normal map, {object_caption}"
+//!
+//! [rgb]                            # method = none | sds | csd | bsd
+//! method = "bsd"
+//! w1 = 7.5
+//! w2 = 6.5
+//!
+//! [normal]
+//! method = "bsd"
+//! w1 = 1.5
+//! w2 = 0.5
+//! ```
+//!
+//! SDS takes `guidance_scale` (diffusers' convention), CSD `w1`, `w2` and optionally `w3`
+//! (default `w2 - w1`, the original CSD), BSD `w1` and `w2`. Each guidance table also takes
+//! gb-diffusion's `timesteps` (`t_min`, `t_max`, `schedule`), `weighting`
+//! (`one_minus_alpha_bar` | `constant`) and `grad_clamp`.
+//!
+//! # The scale of lambda (how our gradient maps to the paper's 1e-4)
+//!
+//! The guided loss of one modality is `lambda * s(t) * (z * g.detach()).sum()`, where `z` is
+//! the VAE encoding of the prior input (the crop, in `[-1, 1]`, times the VAE scaling factor)
+//! and `g = w(t) * mask_latent * direction` with `w(t) = 1 - alpha_bar(t)` and the method's
+//! eps combination as `direction` (gb-diffusion's `ScoreDistiller`, with its NaN zeroing).
+//! Its gradient reaches the rendered pixels through the encoder only; the U-Net runs
+//! without a graph. This is the reference code's injection (Arcxml/GB-NeRF,
+//! `DS_NeRF/guidance/sd_utils.py`, `train_step_sd` / `train_step_sd_normal`:
+//! `SpecifyGradient.apply(latents, grad, mask)` with `grad = w * noise_pred`,
+//! `w = 1 - alphas_cumprod[t]`, and in `run.py` `loss += sds_loss_weight * loss_sds` with
+//! `sds_loss_weight = 1e-4` for the sum of the RGB and normal terms), with two checked
+//! details:
+//!
+//! - the reference applies `grad` to the *noisy* latents `x_t = sqrt(ab) z + sqrt(1-ab) eps`
+//!   that diffusers' `prepare_latents` builds from the encoded image with autodiff on, so
+//!   the encoded latents receive `sqrt(alpha_bar(t)) * grad`. With
+//!   `reference_chain_rule = true` (the default) we multiply by the same
+//!   `s(t) = sqrt(alpha_bar(t))`; with `false`, `s = 1` (threestudio's convention);
+//! - the reference feeds the whole image resized to 512 x 512, we feed the mask's bounding
+//!   box (plus `crop_margin`) rendered directly at the prior's resolution. A rendered pixel
+//!   therefore receives the gradient of exactly one prior pixel here, and of
+//!   `512^2 / (H W)` prior pixels (through the bilinear resize) in the reference: about 0.46
+//!   for SPIn-NeRF's 1008 x 567 images. The same lambda thus means the same per-pixel
+//!   gradient up to that resampling factor, which we do not compensate (Adam's per-parameter
+//!   normalisation makes the step size insensitive to such a constant where only the
+//!   guidance reaches a parameter).
+//!
+//! So `lambda_rgb = lambda_normal = 1e-4` is the paper's setting.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use gb_diffusion::distill::{
+    DistillSettings, GuidanceMethod, PriorInputMode, TimestepConfig, Weighting,
+};
+use serde::{Deserialize, Serialize};
+
+use crate::error::InpaintError;
+
+/// The built-in methods: name and TOML text (`configs/methods/NAME.toml`).
+pub const BUILTIN_METHODS: &[(&str, &str)] = &[
+    (
+        "gb-nerf",
+        include_str!("../../../configs/methods/gb-nerf.toml"),
+    ),
+    ("bsd", include_str!("../../../configs/methods/bsd.toml")),
+    (
+        "mvip-nerf",
+        include_str!("../../../configs/methods/mvip-nerf.toml"),
+    ),
+    (
+        "spin-nerf-sds",
+        include_str!("../../../configs/methods/spin-nerf-sds.toml"),
+    ),
+    ("csd", include_str!("../../../configs/methods/csd.toml")),
+    ("none", include_str!("../../../configs/methods/none.toml")),
+    (
+        "pre-inpainted",
+        include_str!("../../../configs/methods/pre-inpainted.toml"),
+    ),
+];
+
+/// Which score-distillation formula a modality uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GuidanceKind {
+    /// No guidance on this modality.
+    None,
+    /// Score Distillation Sampling.
+    Sds,
+    /// Classifier Score Distillation.
+    Csd,
+    /// Balanced Score Distillation.
+    Bsd,
+}
+
+/// The guidance of one modality (RGB renders or normal maps).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GuidanceConfig {
+    /// The formula.
+    pub method: GuidanceKind,
+    /// SDS: classifier-free guidance scale.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub guidance_scale: Option<f32>,
+    /// CSD / BSD: weight of `eps(y)`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w1: Option<f32>,
+    /// CSD / BSD: weight of `eps(y_neg)` (subtracted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w2: Option<f32>,
+    /// CSD: weight of `eps(null)` (default `w2 - w1`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w3: Option<f32>,
+    /// Timestep range and schedule (paper: uniform in [0.02, 0.98]).
+    #[serde(default)]
+    pub timesteps: TimestepConfig,
+    /// `w(t)` (reference: `1 - alpha_bar`).
+    #[serde(default)]
+    pub weighting: Weighting,
+    /// Optional clamp of the latent gradient.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grad_clamp: Option<f32>,
+}
+
+impl Default for GuidanceConfig {
+    fn default() -> Self {
+        Self::none()
+    }
+}
+
+impl GuidanceConfig {
+    /// No guidance.
+    pub fn none() -> Self {
+        Self {
+            method: GuidanceKind::None,
+            guidance_scale: None,
+            w1: None,
+            w2: None,
+            w3: None,
+            timesteps: TimestepConfig::default(),
+            weighting: Weighting::default(),
+            grad_clamp: None,
+        }
+    }
+
+    /// True unless the method is `none`.
+    pub fn is_active(&self) -> bool {
+        self.method != GuidanceKind::None
+    }
+
+    /// The distillation settings (`None` for `method = "none"`); `table` names the TOML
+    /// table (`rgb` / `normal`) in errors.
+    pub fn settings(&self, table: &str) -> Result<Option<DistillSettings>, String> {
+        let need = |name: &str, v: Option<f32>| {
+            v.ok_or_else(|| format!("[{table}] method = {:?} needs `{name}`", self.method))
+        };
+        let unused = |name: &str, v: Option<f32>| {
+            if v.is_some() {
+                Err(format!(
+                    "[{table}] `{name}` does not apply to method = {:?}",
+                    self.method
+                ))
+            } else {
+                Ok(())
+            }
+        };
+        let guidance = match self.method {
+            GuidanceKind::None => return Ok(None),
+            GuidanceKind::Sds => {
+                unused("w1", self.w1)?;
+                unused("w2", self.w2)?;
+                unused("w3", self.w3)?;
+                GuidanceMethod::Sds {
+                    guidance_scale: need("guidance_scale", self.guidance_scale)?,
+                }
+            }
+            GuidanceKind::Csd => {
+                unused("guidance_scale", self.guidance_scale)?;
+                GuidanceMethod::Csd {
+                    w1: need("w1", self.w1)?,
+                    w2: need("w2", self.w2)?,
+                    w3: self.w3,
+                }
+            }
+            GuidanceKind::Bsd => {
+                unused("guidance_scale", self.guidance_scale)?;
+                unused("w3", self.w3)?;
+                GuidanceMethod::Bsd {
+                    w1: need("w1", self.w1)?,
+                    w2: need("w2", self.w2)?,
+                }
+            }
+        };
+        let settings = DistillSettings {
+            guidance,
+            timesteps: self.timesteps,
+            weighting: self.weighting,
+            grad_clamp: self.grad_clamp,
+        };
+        settings
+            .timesteps
+            .validate()
+            .map_err(|e| format!("[{table}] {e}"))?;
+        settings
+            .guidance
+            .build()
+            .map_err(|e| format!("[{table}] {e}"))?;
+        if let Some(c) = settings.grad_clamp {
+            if !(c.is_finite() && c > 0.0) {
+                return Err(format!("[{table}] grad_clamp = {c} must be > 0"));
+            }
+        }
+        Ok(Some(settings))
+    }
+}
+
+/// Prompt templates; `{caption}` and `{object_caption}` are replaced by the scene's captions
+/// (a procedural scene's `scene.json`: `caption_without_object`, `caption_with_object`), or by
+/// the defaults below when the scene has none.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PromptTemplates {
+    /// `{caption}` when the scene has no caption.
+    #[serde(default = "default_caption")]
+    pub caption: String,
+    /// `{object_caption}` when the scene has no caption of the object.
+    #[serde(default = "default_object_caption")]
+    pub object_caption: String,
+    /// Appearance prompt (RGB guidance).
+    #[serde(default = "default_appearance")]
+    pub appearance: String,
+    /// Negative prompt of the RGB guidance.
+    #[serde(default = "default_negative")]
+    pub negative: String,
+    /// Geometry prompt (normal-map guidance).
+    #[serde(default = "default_geometry")]
+    pub geometry: String,
+    /// Negative prompt of the normal-map guidance.
+    #[serde(default = "default_geometry_negative")]
+    pub geometry_negative: String,
+}
+
+fn default_caption() -> String {
+    "a scene".into()
+}
+fn default_object_caption() -> String {
+    "an object in the scene".into()
+}
+fn default_appearance() -> String {
+    "RGB image, {caption}".into()
+}
+fn default_negative() -> String {
+    "RGB image, {object_caption}".into()
+}
+fn default_geometry() -> String {
+    "normal map, {caption}".into()
+}
+fn default_geometry_negative() -> String {
+    "normal map, {object_caption}".into()
+}
+
+impl Default for PromptTemplates {
+    fn default() -> Self {
+        Self {
+            caption: default_caption(),
+            object_caption: default_object_caption(),
+            appearance: default_appearance(),
+            negative: default_negative(),
+            geometry: default_geometry(),
+            geometry_negative: default_geometry_negative(),
+        }
+    }
+}
+
+/// The captions a scene folder provides.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SceneCaptions {
+    /// The scene without the object.
+    pub caption: Option<String>,
+    /// The scene with the object.
+    pub object_caption: Option<String>,
+}
+
+impl SceneCaptions {
+    /// Reads `caption_without_object` / `caption_with_object` from `DIR/scene.json` (written
+    /// by the procedural generator); a missing file or key gives `None`.
+    pub fn read(scene_dir: &Path) -> Self {
+        let Ok(text) = std::fs::read_to_string(scene_dir.join("scene.json")) else {
+            return Self::default();
+        };
+        let Ok(v) = serde_json::from_str::<serde_json::Value>(&text) else {
+            return Self::default();
+        };
+        let get = |k: &str| v.get(k).and_then(|s| s.as_str()).map(str::to_string);
+        Self {
+            caption: get("caption_without_object"),
+            object_caption: get("caption_with_object"),
+        }
+    }
+}
+
+/// Prompts given on the command line; each replaces the resolved template.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct PromptOverrides {
+    /// `--prompt`.
+    pub appearance: Option<String>,
+    /// `--negative-prompt` (RGB guidance).
+    pub negative: Option<String>,
+    /// `--normal-prompt`.
+    pub geometry: Option<String>,
+}
+
+/// The prompts of a run, resolved.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Prompts {
+    /// Appearance prompt.
+    pub appearance: String,
+    /// Negative prompt of the RGB guidance.
+    pub negative: String,
+    /// Geometry prompt.
+    pub geometry: String,
+    /// Negative prompt of the normal guidance.
+    pub geometry_negative: String,
+}
+
+/// Test hooks (not for users): they make failure paths reachable in tests.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DebugHooks {
+    /// From this step on, the total loss is made NaN (exercises the non-finite-loss policy).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inject_nan_from_step: Option<usize>,
+}
+
+impl DebugHooks {
+    fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
+/// A method: the guidance of each modality and everything around it (see the module docs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MethodConfig {
+    /// Method name.
+    pub name: String,
+    /// One line for reports.
+    #[serde(default)]
+    pub description: String,
+    /// Attach the prior's LoRA (`PRIOR/pytorch_lora_weights.safetensors`, or `--lora`).
+    #[serde(default)]
+    pub use_lora: bool,
+    /// Train on a SPIn-NeRF scene's `RGB_inpainted/` (+ `Depth_inpainted/`) images instead
+    /// of masking (the SPIn-NeRF + LaMa baseline); see [`crate::pre_inpainted`].
+    #[serde(default)]
+    pub pre_inpainted: bool,
+    /// Weight of the RGB guidance (paper's lambda2 = 1e-4).
+    #[serde(default = "default_lambda")]
+    pub lambda_rgb: f64,
+    /// Weight of the normal-map guidance (paper's lambda3 = 1e-4).
+    #[serde(default = "default_lambda")]
+    pub lambda_normal: f64,
+    /// First step of the normal guidance, counted out of `reference_steps` (reference: 500
+    /// of 10000); a run of `N` steps starts it at `normal_start_step * N / reference_steps`.
+    #[serde(default = "default_normal_start")]
+    pub normal_start_step: usize,
+    /// The step count `normal_start_step` refers to (set it to the run's steps for an
+    /// absolute start).
+    #[serde(default = "default_reference_steps")]
+    pub reference_steps: usize,
+    /// Guidance on every k-th step (1: every step).
+    #[serde(default = "default_one")]
+    pub guide_every: usize,
+    /// The RGB prior input: the render alone, or pasted inside the mask onto the ground
+    /// truth (the reference). Normal maps are always the render alone (no ground truth).
+    #[serde(default)]
+    pub prior_input: PriorInputMode,
+    /// The crop is the mask's bounding box grown by this fraction of its size on each side
+    /// (clamped to the image), so that the prior sees context around the hole.
+    #[serde(default = "default_margin")]
+    pub crop_margin: f32,
+    /// The normal map's depth is rendered at `resolution / normal_render_divisor` and the
+    /// normal map upsampled (bilinear) to the prior's resolution (the reference renders
+    /// normals at 1/7 of the image resolution).
+    #[serde(default = "default_normal_divisor")]
+    pub normal_render_divisor: usize,
+    /// Multiply the injected gradient by `sqrt(alpha_bar(t))` as the reference's chain rule
+    /// through the noisy latents does (see the module docs).
+    #[serde(default = "default_true")]
+    pub reference_chain_rule: bool,
+    /// Stop after this many consecutive non-finite losses.
+    #[serde(default = "default_max_nan")]
+    pub max_consecutive_nan: usize,
+    /// Prompt templates.
+    #[serde(default)]
+    pub prompts: PromptTemplates,
+    /// RGB guidance.
+    #[serde(default)]
+    pub rgb: GuidanceConfig,
+    /// Normal-map guidance.
+    #[serde(default)]
+    pub normal: GuidanceConfig,
+    /// Test hooks.
+    #[serde(default, skip_serializing_if = "DebugHooks::is_default")]
+    pub debug: DebugHooks,
+}
+
+fn default_lambda() -> f64 {
+    1e-4
+}
+fn default_normal_start() -> usize {
+    500
+}
+fn default_reference_steps() -> usize {
+    10_000
+}
+fn default_one() -> usize {
+    1
+}
+fn default_margin() -> f32 {
+    0.25
+}
+fn default_normal_divisor() -> usize {
+    2
+}
+fn default_true() -> bool {
+    true
+}
+fn default_max_nan() -> usize {
+    10
+}
+
+impl MethodConfig {
+    /// The names of the built-in methods.
+    pub fn builtin_names() -> Vec<&'static str> {
+        BUILTIN_METHODS.iter().map(|(n, _)| *n).collect()
+    }
+
+    /// A built-in method by name.
+    pub fn builtin(name: &str) -> Result<Self, InpaintError> {
+        let (_, text) = BUILTIN_METHODS
+            .iter()
+            .find(|(n, _)| *n == name)
+            .ok_or_else(|| InpaintError::UnknownMethod {
+                name: name.to_string(),
+                known: Self::builtin_names().join(", "),
+            })?;
+        Self::from_toml(text, Path::new(&format!("configs/methods/{name}.toml")))
+    }
+
+    /// A built-in method name, or a path to a `.toml` file.
+    pub fn load(name_or_path: &str) -> Result<Self, InpaintError> {
+        if name_or_path.ends_with(".toml") {
+            let path = Path::new(name_or_path);
+            let text = std::fs::read_to_string(path).map_err(|e| InpaintError::MethodConfig {
+                path: path.to_path_buf(),
+                reason: e.to_string(),
+            })?;
+            return Self::from_toml(&text, path);
+        }
+        Self::builtin(name_or_path)
+    }
+
+    /// Parses and validates a method; `origin` names it in errors.
+    pub fn from_toml(text: &str, origin: &Path) -> Result<Self, InpaintError> {
+        let cfg: MethodConfig = toml::from_str(text).map_err(|e| InpaintError::MethodConfig {
+            path: origin.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+        cfg.validate()
+            .map_err(|reason| InpaintError::MethodConfig {
+                path: origin.to_path_buf(),
+                reason,
+            })?;
+        Ok(cfg)
+    }
+
+    /// Checks every field that can be checked without a prior or a scene.
+    pub fn validate(&self) -> Result<(), String> {
+        for (name, v) in [
+            ("lambda_rgb", self.lambda_rgb),
+            ("lambda_normal", self.lambda_normal),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{name} = {v} must be a finite number >= 0"));
+            }
+        }
+        if self.guide_every == 0 {
+            return Err("guide_every must be >= 1".into());
+        }
+        if self.reference_steps == 0 {
+            return Err("reference_steps must be >= 1".into());
+        }
+        if !(self.crop_margin.is_finite() && (0.0..=4.0).contains(&self.crop_margin)) {
+            return Err(format!(
+                "crop_margin = {} must be in [0, 4]",
+                self.crop_margin
+            ));
+        }
+        if self.normal_render_divisor == 0 {
+            return Err("normal_render_divisor must be >= 1".into());
+        }
+        if self.max_consecutive_nan == 0 {
+            return Err("max_consecutive_nan must be >= 1".into());
+        }
+        self.rgb.settings("rgb")?;
+        self.normal.settings("normal")?;
+        if self.pre_inpainted && self.needs_prior() {
+            return Err(
+                "pre_inpainted trains on every pixel of the 2D-inpainted images; it cannot be \
+                 combined with rgb or normal guidance"
+                    .into(),
+            );
+        }
+        if self.use_lora && !self.needs_prior() {
+            return Err("use_lora = true but neither rgb nor normal guidance is active".into());
+        }
+        if self.prompts.appearance.trim().is_empty() && self.rgb.is_active() {
+            return Err("prompts.appearance must not be empty".into());
+        }
+        if self.prompts.geometry.trim().is_empty() && self.normal.is_active() {
+            return Err("prompts.geometry must not be empty".into());
+        }
+        Ok(())
+    }
+
+    /// True when a modality has guidance (the run needs a diffusion prior).
+    pub fn needs_prior(&self) -> bool {
+        self.rgb.is_active() || self.normal.is_active()
+    }
+
+    /// The RGB guidance settings, if any (the config is validated on load).
+    pub fn rgb_settings(&self) -> Option<DistillSettings> {
+        self.rgb.settings("rgb").ok().flatten()
+    }
+
+    /// The normal guidance settings, if any.
+    pub fn normal_settings(&self) -> Option<DistillSettings> {
+        self.normal.settings("normal").ok().flatten()
+    }
+
+    /// The first step of the normal guidance in a run of `total_steps` steps:
+    /// `normal_start_step * total_steps / reference_steps` (rounded down).
+    pub fn normal_start_for(&self, total_steps: usize) -> usize {
+        ((self.normal_start_step as u128 * total_steps as u128) / self.reference_steps as u128)
+            as usize
+    }
+
+    /// The prompts of a run: the templates with the scene's captions filled in, then the
+    /// command-line overrides.
+    pub fn resolve_prompts(&self, scene: &SceneCaptions, overrides: &PromptOverrides) -> Prompts {
+        let t = &self.prompts;
+        let mut vars = BTreeMap::new();
+        vars.insert(
+            "{caption}",
+            scene.caption.clone().unwrap_or_else(|| t.caption.clone()),
+        );
+        vars.insert(
+            "{object_caption}",
+            scene
+                .object_caption
+                .clone()
+                .unwrap_or_else(|| t.object_caption.clone()),
+        );
+        let fill = |s: &str| {
+            let mut out = s.to_string();
+            for (k, v) in &vars {
+                out = out.replace(k, v);
+            }
+            out
+        };
+        Prompts {
+            appearance: overrides
+                .appearance
+                .clone()
+                .unwrap_or_else(|| fill(&t.appearance)),
+            negative: overrides
+                .negative
+                .clone()
+                .unwrap_or_else(|| fill(&t.negative)),
+            geometry: overrides
+                .geometry
+                .clone()
+                .unwrap_or_else(|| fill(&t.geometry)),
+            geometry_negative: fill(&t.geometry_negative),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_parses_and_matches_its_name() {
+        for (name, _) in BUILTIN_METHODS {
+            let m = MethodConfig::builtin(name).unwrap();
+            assert_eq!(m.name, *name);
+        }
+        let gb = MethodConfig::builtin("gb-nerf").unwrap();
+        assert!(gb.use_lora && gb.needs_prior());
+        assert_eq!(
+            gb.rgb_settings().unwrap().guidance,
+            GuidanceMethod::Bsd { w1: 7.5, w2: 6.5 }
+        );
+        assert_eq!(
+            gb.normal_settings().unwrap().guidance,
+            GuidanceMethod::Bsd { w1: 1.5, w2: 0.5 }
+        );
+        assert_eq!((gb.lambda_rgb, gb.lambda_normal), (1e-4, 1e-4));
+        assert_eq!(gb.normal_start_for(10_000), 500);
+        assert_eq!(gb.normal_start_for(400), 20);
+        assert_eq!(gb.normal_start_for(3), 0);
+        let bsd = MethodConfig::builtin("bsd").unwrap();
+        assert!(!bsd.use_lora);
+        assert_eq!(bsd.rgb, gb.rgb);
+        let spin = MethodConfig::builtin("spin-nerf-sds").unwrap();
+        assert!(spin.rgb.is_active() && !spin.normal.is_active());
+        let csd = MethodConfig::builtin("csd").unwrap();
+        assert!(matches!(
+            csd.rgb_settings().unwrap().guidance,
+            GuidanceMethod::Csd { w3: Some(_), .. }
+        ));
+        assert!(!MethodConfig::builtin("none").unwrap().needs_prior());
+        assert!(
+            MethodConfig::builtin("pre-inpainted")
+                .unwrap()
+                .pre_inpainted
+        );
+    }
+
+    #[test]
+    fn bad_methods_are_named_errors() {
+        let err = MethodConfig::builtin("nope").unwrap_err().to_string();
+        assert!(err.contains("nope") && err.contains("gb-nerf"), "{err}");
+        let bad = "name = \"x\"\n[rgb]\nmethod = \"bsd\"\nw1 = 1.0\n";
+        let err = MethodConfig::from_toml(bad, Path::new("m.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("m.toml:") && err.contains("w2"), "{err}");
+        let typo = "name = \"x\"\nlamda_rgb = 1.0\n";
+        let err = MethodConfig::from_toml(typo, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("lamda_rgb"), "{err}");
+        let nan = "name = \"x\"\nlambda_rgb = nan\n";
+        assert!(MethodConfig::from_toml(nan, Path::new("n.toml")).is_err());
+    }
+
+    #[test]
+    fn prompts_fill_captions_and_take_overrides() {
+        let m = MethodConfig::builtin("gb-nerf").unwrap();
+        let scene = SceneCaptions {
+            caption: Some("a staircase".into()),
+            object_caption: Some("a staircase with a vase".into()),
+        };
+        let p = m.resolve_prompts(&scene, &PromptOverrides::default());
+        assert_eq!(p.appearance, "RGB image, a staircase");
+        assert_eq!(p.negative, "RGB image, a staircase with a vase");
+        assert_eq!(p.geometry, "normal map, a staircase");
+        let p = m.resolve_prompts(
+            &SceneCaptions::default(),
+            &PromptOverrides {
+                appearance: Some("a bench".into()),
+                ..Default::default()
+            },
+        );
+        assert_eq!(p.appearance, "a bench");
+        assert_eq!(p.geometry, format!("normal map, {}", m.prompts.caption));
+    }
+
+    #[test]
+    fn method_round_trips_through_toml() {
+        for (name, _) in BUILTIN_METHODS {
+            let m = MethodConfig::builtin(name).unwrap();
+            let text = toml::to_string(&m).unwrap();
+            let back = MethodConfig::from_toml(&text, Path::new("rt.toml")).unwrap();
+            assert_eq!(back, m, "{text}");
+        }
+    }
+}

@@ -1,0 +1,241 @@
+//! The diffusion prior of a run: a diffusers-layout Stable Diffusion inpainting folder
+//! (U-Net, VAE, CLIP text encoder, tokenizer, scheduler), optionally with a LoRA file attached
+//! to the U-Net and the text encoder and merged into their weights.
+//!
+//! The U-Net and the text encoder live on the plain device (they run without a graph); the
+//! VAE lives on its autodiff version with frozen parameters, so that the guidance gradient
+//! reaches the rendered image through the encoder only.
+//!
+//! Which LoRA: `--lora FILE` when given (whatever the method says, with a note in the log),
+//! else `PRIOR/pytorch_lora_weights.safetensors` when the method has `use_lora = true` (an
+//! error naming that path when it does not exist), else none. A LoRA file that cannot be
+//! read, that targets weights the prior does not have, or that has no entry for either
+//! network is an error naming the file.
+
+use std::path::{Path, PathBuf};
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor};
+use gb_diffusion::checkpoint::{keymap, DiffusersFolder, WeightVariant};
+use gb_diffusion::clip::{load_text_encoder, ClipTextModel};
+use gb_diffusion::config::SchedulerConfig;
+use gb_diffusion::distill::sd_adapter::{SdUnetEps, SdVaeEncoder};
+use gb_diffusion::distill::{
+    AlphasCumprod, DistillError, InpaintEpsPredictor, LatentEncoder, PromptEncoder,
+};
+use gb_diffusion::lora::{apply_lora, merge_lora, LoraComponent, LoraFile};
+use gb_diffusion::models::{load_unet, load_vae};
+use gb_diffusion::tokenizer::ClipTokenizer;
+use serde::Serialize;
+
+use crate::error::InpaintError;
+use crate::method::MethodConfig;
+
+/// The LoRA file name a fine-tuned prior folder carries (diffusers' `save_lora_weights`).
+pub const LORA_FILE_NAME: &str = "pytorch_lora_weights.safetensors";
+
+/// The LoRA of a run: `explicit` (`--lora`) wins; else the prior's own file when the method
+/// uses one (an error when it is missing); else none.
+pub fn lora_for(
+    method: &MethodConfig,
+    prior_dir: &Path,
+    explicit: Option<&Path>,
+) -> Result<Option<PathBuf>, InpaintError> {
+    if let Some(p) = explicit {
+        if !method.use_lora {
+            tracing::warn!(
+                lora = %p.display(),
+                method = %method.name,
+                "--lora given: attaching it although the method has use_lora = false"
+            );
+        }
+        return Ok(Some(p.to_path_buf()));
+    }
+    if !method.use_lora {
+        return Ok(None);
+    }
+    let expected = prior_dir.join(LORA_FILE_NAME);
+    if expected.is_file() {
+        Ok(Some(expected))
+    } else {
+        Err(InpaintError::LoraMissing {
+            method: method.name.clone(),
+            expected,
+        })
+    }
+}
+
+/// What was loaded, for `config.toml` and the logs.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PriorInfo {
+    /// The prior folder.
+    pub folder: PathBuf,
+    /// The LoRA file attached, if any.
+    pub lora: Option<PathBuf>,
+    /// Weights adapted by the LoRA in the U-Net.
+    pub lora_unet_weights: usize,
+    /// Weights adapted by the LoRA in the text encoder.
+    pub lora_text_encoder_weights: usize,
+    /// The prior's native square resolution (U-Net sample size times the VAE factor).
+    pub resolution: usize,
+    /// The VAE's spatial factor.
+    pub vae_factor: usize,
+    /// Number of diffusion training timesteps.
+    pub num_train_timesteps: usize,
+}
+
+/// CLIP tokenizer + text model (LoRA merged) as a prompt encoder.
+pub struct ClipEncoder {
+    tokenizer: ClipTokenizer,
+    model: ClipTextModel,
+    device: Device,
+}
+
+impl PromptEncoder for ClipEncoder {
+    fn encode_prompt(&self, prompt: &str) -> Result<Tensor<3>, DistillError> {
+        let err = |source: Box<dyn std::error::Error + Send + Sync>| DistillError::PromptEncoder {
+            prompt: prompt.to_string(),
+            source,
+        };
+        let ids = self
+            .tokenizer
+            .encode(prompt)
+            .map_err(|e| err(Box::new(e)))?;
+        let row: Vec<i64> = ids.into_iter().map(i64::from).collect();
+        let ids = self
+            .model
+            .ids_tensor(&[row], &self.device)
+            .map_err(|e| err(Box::new(e)))?;
+        Ok(self.model.forward(ids))
+    }
+}
+
+/// The loaded prior behind the distillation interfaces (so that tests may substitute mocks).
+pub struct GuidancePrior {
+    /// Noise predictor (no graph).
+    pub unet: Box<dyn InpaintEpsPredictor>,
+    /// Differentiable latent encoder.
+    pub encoder: Box<dyn LatentEncoder>,
+    /// Prompt encoder.
+    pub text: Box<dyn PromptEncoder>,
+    /// `alphas_cumprod` of the scheduler.
+    pub alphas: AlphasCumprod,
+    /// The prior's square input resolution.
+    pub resolution: usize,
+    /// What was loaded.
+    pub info: PriorInfo,
+}
+
+impl GuidancePrior {
+    /// Loads the prior folder `root` on `device` (the plain device of the run's backend) and
+    /// attaches `lora` (see the module docs).
+    pub fn load(root: &Path, lora: Option<&Path>, device: &Device) -> Result<Self, InpaintError> {
+        let prior_err = |component: &str, e: &dyn std::fmt::Display| InpaintError::Prior {
+            path: root.to_path_buf(),
+            reason: format!("{component}: {e}"),
+        };
+        if !root.is_dir() {
+            return Err(InpaintError::Prior {
+                path: root.to_path_buf(),
+                reason: "not a folder (expected a diffusers layout: model_index.json, unet/, \
+                         vae/, text_encoder/, tokenizer/, scheduler/)"
+                    .into(),
+            });
+        }
+        let lora_file = match lora {
+            Some(p) => Some(LoraFile::read(p).map_err(|e| {
+                // gb-diffusion's message already starts with "LoRA file PATH: "
+                let text = e.to_string();
+                let prefix = format!("LoRA file {}: ", p.display());
+                InpaintError::Lora {
+                    path: p.to_path_buf(),
+                    reason: text.strip_prefix(&prefix).unwrap_or(&text).to_string(),
+                }
+            })?),
+            None => None,
+        };
+        let lora_err = |e: &dyn std::fmt::Display| InpaintError::Lora {
+            path: lora.map(Path::to_path_buf).unwrap_or_default(),
+            reason: e.to_string(),
+        };
+        let folder = DiffusersFolder::open(root).map_err(|e| prior_err("model_index", &e))?;
+        let (mut unet, unet_cfg) = load_unet(root, device).map_err(|e| prior_err("unet", &e))?;
+        let (vae, vae_cfg) =
+            load_vae(root, &device.clone().autodiff()).map_err(|e| prior_err("vae", &e))?;
+        let mut text = load_text_encoder(&folder, WeightVariant::Auto, device)
+            .map_err(|e| prior_err("text_encoder", &e))?;
+        let tok_dir = folder
+            .component_dir("tokenizer")
+            .map_err(|e| prior_err("tokenizer", &e))?;
+        let tokenizer =
+            ClipTokenizer::from_dir(&tok_dir).map_err(|e| prior_err("tokenizer", &e))?;
+        let sched_path = root.join("scheduler").join("scheduler_config.json");
+        let sched = if sched_path.is_file() {
+            SchedulerConfig::from_file(&sched_path).map_err(|e| prior_err("scheduler", &e))?
+        } else {
+            SchedulerConfig::default()
+        };
+        let alphas = AlphasCumprod::from_config(&sched).map_err(|e| prior_err("scheduler", &e))?;
+
+        let (mut n_unet, mut n_text) = (0, 0);
+        if let Some(file) = &lora_file {
+            let section = if unet_cfg.use_linear_projection {
+                keymap::UNET_LINEAR_PROJECTION
+            } else {
+                keymap::UNET
+            };
+            let (u, n) =
+                apply_lora(unet, file, LoraComponent::Unet, &section).map_err(|e| lora_err(&e))?;
+            unet = merge_lora(u);
+            n_unet = n;
+            let (t, n) = apply_lora(
+                text,
+                file,
+                LoraComponent::TextEncoder,
+                &keymap::TEXT_ENCODER,
+            )
+            .map_err(|e| lora_err(&e))?;
+            text = merge_lora(t);
+            n_text = n;
+            if n_unet + n_text == 0 {
+                return Err(lora_err(
+                    &"no entry for the U-Net or the text encoder (nothing to attach)",
+                ));
+            }
+            tracing::info!(
+                lora = %file.path.display(),
+                unet_weights = n_unet,
+                text_encoder_weights = n_text,
+                "LoRA attached and merged"
+            );
+        }
+        let factor = vae_cfg.scale_factor();
+        let resolution = unet_cfg.sample_size.unwrap_or(64) * factor;
+        let info = PriorInfo {
+            folder: root.to_path_buf(),
+            lora: lora.map(Path::to_path_buf),
+            lora_unet_weights: n_unet,
+            lora_text_encoder_weights: n_text,
+            resolution,
+            vae_factor: factor,
+            num_train_timesteps: alphas.len(),
+        };
+        Ok(Self {
+            unet: Box::new(SdUnetEps::new(
+                unet,
+                unet_cfg.in_channels,
+                sched.prediction_type,
+                alphas.clone(),
+            )),
+            encoder: Box::new(SdVaeEncoder::new(vae.no_grad(), factor)),
+            text: Box::new(ClipEncoder {
+                tokenizer,
+                model: text,
+                device: device.clone(),
+            }),
+            alphas,
+            resolution,
+            info,
+        })
+    }
+}
