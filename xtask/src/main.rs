@@ -25,6 +25,8 @@ enum Command {
     Finetune(cmd::finetune::Args),
     /// Object removal: train a NeRF on the unmasked pixels and fill the mask (default job).
     Inpaint(cmd::inpaint::Args),
+    /// The paper's method grid on one scene: baseline and ablation tables, CSD w3 sweep.
+    Ablate(cmd::ablate::Args),
     /// 2D inpainting with a Stable Diffusion inpainting prior (checks that a prior loads).
     InpaintImage(cmd::inpaint_image::Args),
     /// The 2D score-distillation playground: SDS, CSD or BSD on the pixels inside a mask.
@@ -53,6 +55,7 @@ fn main() {
         Command::Eval(a) => cmd::eval::run(a),
         Command::Finetune(a) => cmd::finetune::run(a),
         Command::Inpaint(a) => cmd::inpaint::run(a),
+        Command::Ablate(a) => cmd::ablate::run(a),
         Command::InpaintImage(a) => cmd::inpaint_image::run(a),
         Command::DistillImage(a) => cmd::distill_image::run(a),
         Command::Parity(a) => cmd::parity::run(a),

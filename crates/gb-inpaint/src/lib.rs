@@ -14,16 +14,25 @@
 //! - [`guidance`]: one guidance term injected as `lambda * s(t) * (z * g.detach()).sum()`;
 //! - [`trainer`]: the guided trainer (one backward per step, NaN policy, checkpoints,
 //!   resume, `train_log.jsonl`);
-//! - [`pre_inpainted`]: the SPIn-NeRF + LaMa baseline's inputs.
+//! - [`pre_inpainted`]: the SPIn-NeRF + LaMa baseline's inputs;
+//! - [`metrics`]: every `gb_eval` metric that applies to a run's test views;
+//! - [`report`], [`svg`], [`gif`]: the run's `report.html`, its SVG charts (a small writer of
+//!   our own rather than a plotting crate, see [`svg`]) and the orbit animation;
+//! - [`ablate`]: the tables of `cargo xtask ablate` (baselines, ablation, w3 sweep).
 //!
 //! The command line is `cargo xtask inpaint` (xtask/src/cmd/inpaint.rs).
 
+pub mod ablate;
 pub mod crop;
 pub mod error;
+pub mod gif;
 pub mod guidance;
 pub mod method;
+pub mod metrics;
 pub mod pre_inpainted;
 pub mod prior;
+pub mod report;
+pub mod svg;
 pub mod trainer;
 
 pub use error::InpaintError;

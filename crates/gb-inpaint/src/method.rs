@@ -85,6 +85,10 @@ pub const BUILTIN_METHODS: &[(&str, &str)] = &[
         include_str!("../../../configs/methods/mvip-nerf.toml"),
     ),
     (
+        "sds-lora",
+        include_str!("../../../configs/methods/sds-lora.toml"),
+    ),
+    (
         "spin-nerf-sds",
         include_str!("../../../configs/methods/spin-nerf-sds.toml"),
     ),

@@ -4,7 +4,7 @@
 //! ```text
 //! cargo xtask inpaint [--scene DIR] [--method M] [--preset P] [--prior none|tiny|DIR|HUB_ID]
 //!     [--lora FILE] [--prompt P] [--negative-prompt N] [--normal-prompt G] [--device D]
-//!     [--out DIR] [--resume] [--steps N]
+//!     [--out DIR] [--resume] [--steps N] [--baseline DIR] [--weights DIR] [--orbit-frames N]
 //! ```
 //!
 //! - `--method`: a built-in method (`configs/methods/`: gb-nerf, bsd, mvip-nerf,
@@ -40,7 +40,16 @@
 //! - `renders/NAME_{rgb,depth,normal}.png`: every test view;
 //! - `metrics.json`: per-view and mean PSNR / SSIM over the whole image and over the mask's
 //!   bounding box (when the view has a mask), disparity PSNR where ground-truth depth exists
-//!   (gb-eval's 8-bit D-PSNR convention), timings of guided and unguided steps.
+//!   (gb-eval's 8-bit D-PSNR convention), timings of guided and unguided steps; and under
+//!   `eval` every gb-eval metric that applies (`gb_inpaint::metrics`: PSNR / SSIM full, bbox
+//!   and mask, ST-LPIPS with the weights of `--weights` or `$GB_TEST_DATA/weights`, D-PSNR,
+//!   FID / D-FID from 8 test views, BRISQUE, NIMA), with the reason of each unavailable one;
+//! - `orbit.gif`: the trained field along a closed path through the input cameras, at half
+//!   the training resolution (`--orbit-frames`, default 24; 0 for none; `gb_inpaint::gif`);
+//! - `report.html` (+ `report/`): ground truth, our render, the baseline (`--baseline DIR`,
+//!   another run's folder; else the masked input, said so) and the difference per test view
+//!   (masked training views for a scene without test views), the orbit, the metric table
+//!   and the training curves as SVG (`gb_inpaint::report`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -49,7 +58,9 @@ use anyhow::{bail, Context};
 use gb_core::BackendKind;
 use gb_eval::disparity::{disparity_to_rgb8, ScalarMap};
 use gb_eval::{psnr, ssim, Region};
+use gb_inpaint::metrics::{evaluate, MetricOptions, ViewPair};
 use gb_inpaint::pre_inpainted;
+use gb_inpaint::report::RunPage;
 use gb_inpaint::{
     lora_for, FitOptions, GuidancePrior, GuidedTrainer, MethodConfig, PromptOverrides,
     SceneCaptions,
@@ -104,6 +115,18 @@ pub struct Args {
     /// Override the preset's number of training steps.
     #[arg(long)]
     pub steps: Option<usize>,
+    /// Another run's output folder (or its `renders/`): its test-view renders are the
+    /// baseline column of `report.html` (default: the masked input, said so on the page).
+    #[arg(long)]
+    pub baseline: Option<PathBuf>,
+    /// Folder of metric weights (ST-LPIPS, FID, BRISQUE, NIMA; default
+    /// `$GB_TEST_DATA/weights` when it exists). Metrics without weights are reported
+    /// unavailable, with the reason.
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// Frames of the orbit animation `orbit.gif` (0: none).
+    #[arg(long, default_value_t = 24)]
+    pub orbit_frames: usize,
 }
 
 fn load_or_generate(args: &Args) -> anyhow::Result<(PathBuf, Scene)> {
@@ -217,8 +240,22 @@ fn quote(s: &str) -> String {
 
 /// Runs the command.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    run_inpaint(&args).map(|_| ())
+}
+
+/// Runs one inpainting job and returns its `metrics.json` (also used by `cargo xtask
+/// ablate`, which calls it once per method).
+pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
     let device = args.device.unwrap_or_default();
-    let (method_name, prior_spec) = method_and_prior(&args);
+    if let Some(b) = &args.baseline {
+        if !b.is_dir() {
+            bail!(
+                "--baseline {}: not a folder (expected another run's output folder)",
+                b.display()
+            );
+        }
+    }
+    let (method_name, prior_spec) = method_and_prior(args);
     let method = load_method(&method_name)?;
     let mut config = load_preset(&args.preset)?;
     if let Some(steps) = args.steps {
@@ -255,7 +292,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None
     };
 
-    let (scene_dir, mut scene) = load_or_generate(&args)?;
+    let (scene_dir, mut scene) = load_or_generate(args)?;
     require_masks(&scene)?;
     let pre = if method.pre_inpainted {
         Some(pre_inpainted::apply(&mut scene, &scene_dir)?)
@@ -289,7 +326,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         GuidedTrainer::new(&scene, config, method.clone(), guidance, device)?
     };
     write_config(
-        &args,
+        args,
         &scene_dir,
         &trainer,
         &method,
@@ -318,10 +355,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut per_view = Vec::new();
     let (mut sums, mut counts) = ([0.0f64; 5], [0usize; 5]);
     let render_start = Instant::now();
+    let mut pairs = Vec::new();
     for view in scene.split(Split::Test) {
         let v = prepare_view(view, trainer.config.train.image_downscale);
         let r = trainer.render(&v.camera);
         write_render_pngs(&renders, &view.name, &r)?;
+        pairs.push(ViewPair {
+            name: view.name.clone(),
+            pred: r.rgb.clone(),
+            gt: v.image.clone(),
+            mask: v.mask.as_ref().map(|m| m.data.clone()),
+            disparity: v.depth.as_ref().map(|gt| {
+                let (w, h) = (v.image.width, v.image.height);
+                (disparity_map(&r.depth, w, h), disparity_map(gt, w, h))
+            }),
+        });
         let full = (
             psnr(&r.rgb, &v.image, &Region::Full)?,
             ssim(&r.rgb, &v.image, &Region::Full)?,
@@ -372,6 +420,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "evaluations_per_ray": r.evaluations_per_ray,
         }));
     }
+    let render_seconds = render_start.elapsed().as_secs_f64();
+    let eval_start = Instant::now();
+    let eval = evaluate(&pairs, &MetricOptions::new(args.weights.clone(), device));
+    let eval_seconds = eval_start.elapsed().as_secs_f64();
+    let orbit = gb_inpaint::gif::write_orbit(&args.out, &scene, &trainer, args.orbit_frames)?;
     let mean = |i: usize| (counts[i] > 0).then(|| sums[i] / counts[i] as f64);
     let per_step = |secs: f64, n: usize| (n > 0).then(|| secs / n as f64);
     let metrics = json!({
@@ -383,7 +436,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "device": device.name(),
         "steps": trainer.step,
         "train_seconds_this_run": summary.seconds,
-        "render_seconds": render_start.elapsed().as_secs_f64(),
+        "render_seconds": render_seconds,
+        "eval_seconds": eval_seconds,
+        "orbit": orbit.as_ref().map(|o| json!({"file": "orbit.gif", "frames": o.frames, "width": o.width, "height": o.height, "seconds": o.seconds})),
         "samples_per_ray": trainer.config.sampler.samples_per_ray,
         "mean_train_evaluations_per_ray": summary.mean_evaluations_per_ray,
         "guidance": {
@@ -401,16 +456,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "psnr": mean(0), "ssim": mean(1), "psnr_bbox": mean(2), "ssim_bbox": mean(3), "d_psnr": mean(4),
         },
         "views": per_view,
+        "eval": eval.to_json(),
+        "report": "report.html",
         "notes": "PSNR/SSIM: gb_eval (scikit-image conventions) on [0,1] RGB; *_bbox over the \
                   test view's mask bounding box; d_psnr: PSNR of 8-bit max-normalised disparity \
                   (gb_eval::disparity); infinite values are written as null; guidance timings \
-                  are this run's wall time per step (train_log.jsonl has every step)",
+                  are this run's wall time per step (train_log.jsonl has every step); `eval`: \
+                  every gb-eval metric that applies (cargo xtask eval's keys and JSON: _bbox, \
+                  _mask regions, lpips = ST-LPIPS, fid / d_fid, brisque, nima), unavailable ones \
+                  null with the reason under eval.unavailable",
     });
     let path = args.out.join("metrics.json");
     write_json(&path, &metrics)?;
+    let page = gb_inpaint::report::write_run_report(&RunPage {
+        out: &args.out,
+        scene: &scene,
+        trainer: &trainer,
+        pairs: &pairs,
+        eval: &eval,
+        metrics: &metrics,
+        baseline: args.baseline.as_deref(),
+        orbit: orbit.is_some(),
+    })?;
     println!("{}", serde_json::to_string_pretty(&metrics["mean"])?);
-    println!("wrote {}", path.display());
-    Ok(())
+    println!("wrote {} and {}", path.display(), page.display());
+    Ok(metrics)
 }
 
 /// Writes `OUT/config.toml`: the command that reproduces the run, then the resolved prior,

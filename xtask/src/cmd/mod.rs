@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod ablate;
 pub mod bench;
 pub mod bench_eval;
 pub mod bench_nerf;
