@@ -386,8 +386,7 @@ fn pre_inpainted_without_inpainted_images_is_an_error_naming_the_scene() {
 
 #[test]
 fn without_method_and_prior_the_default_runs() {
-    // gb-nerf with the built-in tiny prior once assets/tiny-prior exists; until then the
-    // documented temporary fallback to --prior none
+    // gb-nerf with the built-in tiny prior (assets/tiny-prior) and its LoRA
     let dir = tempfile::tempdir().unwrap();
     let (scene, preset) = setup(dir.path());
     let out = dir.path().join("out");
@@ -395,7 +394,8 @@ fn without_method_and_prior_the_default_runs() {
         &inpaint(&scene, &preset, &out, &["--steps", "1"]),
         "default",
     );
-    let tiny = workspace_root().join("assets/tiny-prior/model_index.json");
-    let want = if tiny.is_file() { "gb-nerf" } else { "none" };
-    assert_eq!(metrics(&out)["method"], want);
+    let m = metrics(&out);
+    assert_eq!(m["method"], "gb-nerf");
+    let cfg = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(cfg.contains("tiny-prior"), "{cfg}");
 }

@@ -28,6 +28,16 @@ SD15_VAE = dict(in_channels=3, out_channels=3, latent_channels=4, layers_per_blo
 
 
 def peak_rss_mb():
+    # VmHWM of this process's own address space. ru_maxrss is not used: Linux carries the
+    # parent's peak over fork+exec, so under `cargo xtask bench unet` it reported the Rust
+    # side's peak instead of ours.
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 

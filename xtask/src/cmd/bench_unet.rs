@@ -11,6 +11,7 @@ use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
+use burn::module::Module;
 use burn::tensor::{Distribution, Tensor};
 use gb_core::BackendKind;
 use gb_diffusion::config::{AutoencoderKLConfig, UNet2DConditionConfig};
@@ -121,7 +122,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     drop(unet);
 
     let ad = device.clone().autodiff();
-    let vae = AutoencoderKL::new(&sd15_vae(), &ad);
+    // Frozen weights, gradient to the image only, as the guidance step and the reference do.
+    let vae = AutoencoderKL::new(&sd15_vae(), &ad).no_grad();
     let mut vae_times = serde_json::Map::new();
     for &size in &args.vae_sizes {
         tracing::info!(size, "VAE encoder forward+backward");

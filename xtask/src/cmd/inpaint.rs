@@ -21,11 +21,6 @@
 //! - Prompts: the method's templates filled with the scene's captions (`scene.json` of a
 //!   procedural scene), unless given.
 //!
-//! **TEMPORARY fallback**: while `assets/tiny-prior` does not exist yet, a run with neither
-//! `--prior` nor `--method` falls back to `--prior none` (method `none`) with a warning, so
-//! that the README's `cargo xtask inpaint` keeps working. An explicit `--method` that needs
-//! the prior still errors. Remove `tiny_fallback` once the asset lands.
-//!
 //! Everything a user can get wrong (method file, prior folder, LoRA file, a scene without
 //! masks, missing pre-inpainted images) is reported before training starts; errors exit 2.
 //!
@@ -153,8 +148,8 @@ fn load_or_generate(args: &Args) -> anyhow::Result<(PathBuf, Scene)> {
     Ok((dir, scene))
 }
 
-/// The method name and prior spec of a run (see the module docs, including the temporary
-/// tiny-prior fallback).
+/// The method name and prior spec of a run (see the module docs): by default `gb-nerf`
+/// with the built-in tiny prior.
 fn method_and_prior(args: &Args) -> (String, Option<String>) {
     match (&args.method, &args.prior) {
         (m, Some(p)) if p == "none" => (m.clone().unwrap_or_else(|| "none".into()), None),
@@ -163,22 +158,7 @@ fn method_and_prior(args: &Args) -> (String, Option<String>) {
             Some(p.clone()),
         ),
         (Some(m), None) => (m.clone(), Some("tiny".into())),
-        (None, None) => tiny_fallback(),
-    }
-}
-
-/// TEMPORARY (remove once `assets/tiny-prior` is committed): the no-argument default.
-fn tiny_fallback() -> (String, Option<String>) {
-    let tiny = gb_core::tiny_prior_dir();
-    if tiny.join("model_index.json").is_file() {
-        ("gb-nerf".into(), Some("tiny".into()))
-    } else {
-        tracing::warn!(
-            "the built-in tiny prior is not at {} yet: running without a prior \
-             (--prior none, method none)",
-            tiny.display()
-        );
-        ("none".into(), None)
+        (None, None) => ("gb-nerf".into(), Some("tiny".into())),
     }
 }
 
