@@ -56,6 +56,10 @@ fn to_u8(img: &RgbImage) -> Vec<u8> {
 }
 
 fn run_method(method: &str, expected_batch: u64) {
+    run_method_with(PRIOR, method, expected_batch);
+}
+
+fn run_method_with(prior: &str, method: &str, expected_batch: u64) {
     let dir = tempfile::tempdir().unwrap();
     let (image, mask) = write_inputs(dir.path());
     let out = dir.path().join("out");
@@ -64,7 +68,7 @@ fn run_method(method: &str, expected_batch: u64) {
     let args = [
         "distill-image",
         "--prior",
-        PRIOR,
+        prior,
         "--image",
         image.to_str().unwrap(),
         "--mask",
@@ -171,6 +175,11 @@ fn csd_changes_only_the_masked_pixels() {
 #[test]
 fn bsd_changes_only_the_masked_pixels() {
     run_method("bsd", 2);
+}
+
+#[test]
+fn bsd_runs_with_the_builtin_tiny_prior() {
+    run_method_with("tiny", "bsd", 2);
 }
 
 #[test]

@@ -28,9 +28,10 @@ pub enum Method {
 /// Arguments of `distill-image`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Diffusers-layout prior folder (unet/, vae/, text_encoder/, tokenizer/, scheduler/).
+    /// The prior: `tiny` (the built-in prior), a diffusers-layout folder (unet/, vae/,
+    /// text_encoder/, tokenizer/, scheduler/) or a cached hub id.
     #[arg(long)]
-    pub prior: PathBuf,
+    pub prior: String,
     /// The image (PNG/JPEG).
     #[arg(long)]
     pub image: PathBuf,
@@ -99,8 +100,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("creating {}", args.out.display()))?;
 
     let device = kind.device();
-    let prior = SdPrior::load(&args.prior, &device)
-        .with_context(|| format!("loading the prior from {}", args.prior.display()))?;
+    let prior_dir = super::finetune::resolve_prior(&args.prior)?;
+    let prior = SdPrior::load(&prior_dir, &device)
+        .with_context(|| format!("loading the prior from {}", prior_dir.display()))?;
     let resolution = args.resolution.unwrap_or(prior.resolution);
     let guidance = match args.method {
         Method::Sds => GuidanceMethod::Sds {

@@ -11,10 +11,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 /// Arguments of `cargo xtask inpaint-image`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Diffusers-layout inpainting folder (tokenizer, text_encoder, unet with 9 input
-    /// channels, vae, scheduler).
+    /// `tiny` (the built-in prior), a diffusers-layout inpainting folder (tokenizer,
+    /// text_encoder, unet with 9 input channels, vae, scheduler) or a cached hub id.
     #[arg(long)]
-    prior: PathBuf,
+    prior: String,
     /// Input image (PNG/JPEG); its size must be a multiple of the VAE factor (8 for SD).
     #[arg(long)]
     image: PathBuf,
@@ -67,9 +67,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let kind = args.device.unwrap_or_default();
     let device = kind.device();
-    let prior = InpaintPrior::load(&args.prior, &device)
-        .with_context(|| format!("loading prior {}", args.prior.display()))?;
-    tracing::info!(device = %kind, steps = args.steps, "prior loaded from {}", args.prior.display());
+    let prior_dir = super::finetune::resolve_prior(&args.prior)?;
+    let prior = InpaintPrior::load(&prior_dir, &device)
+        .with_context(|| format!("loading prior {}", prior_dir.display()))?;
+    tracing::info!(device = %kind, steps = args.steps, "prior loaded from {}", prior_dir.display());
 
     let req = InpaintRequest {
         width: img.width,
