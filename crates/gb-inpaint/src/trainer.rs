@@ -38,21 +38,13 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use burn::module::Module;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
-use burn::tensor::{Bytes, Tensor, TensorData};
+use burn::tensor::Tensor;
 use gb_core::BackendKind;
 use gb_diffusion::distill::{DistillSettings, PromptCache, PromptEmbeddings, StepDiagnostics};
-use gb_nerf::field::NerfField;
-use gb_nerf::render::image::{render_image, ImageRender, ImageSettings};
-use gb_nerf::render::rays::camera_rays;
-use gb_nerf::render::{render_rays, Background};
-use gb_nerf::sampler::{OccupancyGrid, RayBatch, SceneSpace};
-use gb_nerf::scene::{Camera, Scene};
-use gb_nerf::train::checkpoint::{self, CheckpointMeta, CheckpointParts};
+use gb_nerf::scene::Scene;
 use gb_nerf::train::data::TrainData;
-use gb_nerf::train::losses::{disparity_loss, mse, psnr_from_mse};
-use gb_nerf::train::{NerfConfig, NerfError, Trainer};
+use gb_nerf::train::losses::psnr_from_mse;
+use gb_nerf::train::{NerfConfig, Trainer};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -203,39 +195,28 @@ pub struct FitOptions {
 
 /// The guided reconstruction (see the module docs).
 pub struct GuidedTrainer {
-    /// The NeRF configuration (preset).
-    pub config: NerfConfig,
+    /// gb-nerf's trainer: field, data, scene parameterisation, Adam, ray stream, step.
+    /// `GuidedTrainer` dereferences to it.
+    pub nerf: Trainer,
     /// The method.
     pub method: MethodConfig,
-    /// Training views and unmasked pixels.
-    pub data: TrainData,
-    /// Scene parameterisation.
-    pub space: SceneSpace,
-    /// Near bound.
-    pub near: f32,
-    /// Far bound.
-    pub far: f32,
-    /// Background of empty rays.
-    pub background: Background,
-    /// The field (autodiff device).
-    pub field: NerfField,
-    /// Empty-space skipping.
-    pub occupancy: Option<OccupancyGrid>,
-    /// Steps completed (including skipped ones).
-    pub step: usize,
-    /// Backend.
-    pub backend: BackendKind,
     /// The guidance (`None` for methods without a prior).
     pub guidance: Option<GuidanceState>,
-    optimizer: ModuleOptimizer,
-    rng: ChaCha8Rng,
-    has_depth: bool,
     nan_streak: usize,
     last_good_checkpoint: Option<(PathBuf, usize)>,
 }
 
-fn adam() -> ModuleOptimizer {
-    AdamConfig::new().with_epsilon(1e-15).init()
+impl std::ops::Deref for GuidedTrainer {
+    type Target = Trainer;
+    fn deref(&self) -> &Trainer {
+        &self.nerf
+    }
+}
+
+impl std::ops::DerefMut for GuidedTrainer {
+    fn deref_mut(&mut self) -> &mut Trainer {
+        &mut self.nerf
+    }
 }
 
 /// A seed for `(seed, step, salt)` (SplitMix64 finaliser).
@@ -331,15 +312,12 @@ impl GuidedTrainer {
         guidance: Option<(GuidancePrior, Prompts)>,
         backend: BackendKind,
     ) -> Result<Self, InpaintError> {
-        let base = Trainer::new(scene, config, backend)?;
-        let mut t = Self::from_base(base, scene, method, guidance)?;
-        t.rng = ChaCha8Rng::seed_from_u64(t.config.train.seed);
-        if t.config.sampler.occupancy.is_some() {
-            // gb-nerf's Trainer::new estimates the typical sample interval from 256 rays of
-            // its stream: replay those draws so that the streams stay identical.
-            let _ = t.batch_rays(256);
-        }
-        Ok(t)
+        Self::from_base(
+            Trainer::new(scene, config, backend)?,
+            scene,
+            method,
+            guidance,
+        )
     }
 
     /// Restores a trainer from a gb-nerf checkpoint of the same scene (parameters, Adam
@@ -353,50 +331,29 @@ impl GuidedTrainer {
         backend: BackendKind,
         steps: Option<usize>,
     ) -> Result<Self, InpaintError> {
-        let mut base = Trainer::resume(scene, path, backend)?;
+        let mut nerf = Trainer::resume(scene, path, backend)?;
         if let Some(s) = steps {
-            base.config.train.steps = s;
+            nerf.config.train.steps = s;
         }
-        let parts = checkpoint::load(path)?;
-        let mut t = Self::from_base(base, scene, method, guidance)?;
-        t.optimizer = adam()
-            .from_bytes(Bytes::from_bytes_vec(parts.optimizer))
-            .map_err(|e| NerfError::Checkpoint {
-                path: path.to_path_buf(),
-                reason: format!("optimizer: {e}"),
-            })?;
-        t.rng = ChaCha8Rng::seed_from_u64(t.config.train.seed.wrapping_add(t.step as u64));
-        t.last_good_checkpoint = Some((path.to_path_buf(), t.step));
+        let mut t = Self::from_base(nerf, scene, method, guidance)?;
+        t.last_good_checkpoint = Some((path.to_path_buf(), t.nerf.step));
         Ok(t)
     }
 
     fn from_base(
-        base: Trainer,
+        nerf: Trainer,
         scene: &Scene,
         method: MethodConfig,
         guidance: Option<(GuidancePrior, Prompts)>,
     ) -> Result<Self, InpaintError> {
-        let Trainer {
-            config,
-            data,
-            space,
-            near,
-            far,
-            background,
-            field,
-            occupancy,
-            step,
-            backend,
-            ..
-        } = base;
         let guidance = match (method.needs_prior(), guidance) {
             (true, Some((prior, prompts))) => Some(GuidanceState::new(
                 &method,
                 prior,
                 prompts,
-                &data,
+                &nerf.data,
                 &scene.name,
-                backend,
+                nerf.backend,
             )?),
             (true, None) => {
                 return Err(InpaintError::PriorRequired {
@@ -405,24 +362,10 @@ impl GuidedTrainer {
             }
             (false, _) => None,
         };
-        let has_depth = data.views.iter().any(|v| v.depth.is_some());
-        let seed = config.train.seed;
         Ok(Self {
-            config,
+            nerf,
             method,
-            data,
-            space,
-            near,
-            far,
-            background,
-            field,
-            occupancy,
-            step,
-            backend,
             guidance,
-            optimizer: adam(),
-            rng: ChaCha8Rng::seed_from_u64(seed),
-            has_depth,
             nan_streak: 0,
             last_good_checkpoint: None,
         })
@@ -430,7 +373,7 @@ impl GuidedTrainer {
 
     /// The first step of the normal guidance in this run.
     pub fn normal_start(&self) -> usize {
-        self.method.normal_start_for(self.config.train.steps)
+        self.method.normal_start_for(self.nerf.config.train.steps)
     }
 
     /// Consecutive non-finite losses so far.
@@ -443,43 +386,16 @@ impl GuidedTrainer {
         self.last_good_checkpoint.as_ref()
     }
 
-    /// Draws `n` random unmasked training pixels (gb-nerf's `Trainer::batch_rays`).
-    fn batch_rays(&mut self, n: usize) -> (RayBatch, Vec<f32>, Vec<f32>, Vec<f32>) {
-        let mut rays = RayBatch::default();
-        let mut rgb = Vec::with_capacity(n * 3);
-        let mut disp = Vec::with_capacity(n);
-        let mut valid = Vec::with_capacity(n);
-        for _ in 0..n {
-            let p = self.data.pixels[self.rng.random_range(0..self.data.pixels.len())];
-            let v = &self.data.views[p.view as usize];
-            let px = [p.x as f32 + 0.5, p.y as f32 + 0.5];
-            let r = camera_rays(&v.camera, &[px], &self.space, self.near, self.far);
-            rays.origins.extend(r.origins);
-            rays.dirs.extend(r.dirs);
-            rays.near.extend(r.near);
-            rays.far.extend(r.far);
-            rgb.extend_from_slice(&v.image.get(p.x as usize, p.y as usize));
-            let d = v
-                .depth
-                .as_ref()
-                .map(|d| d[p.y as usize * v.image.width + p.x as usize])
-                .filter(|d| d.is_finite() && *d > 0.0);
-            disp.push(d.map_or(0.0, |d| self.near / d));
-            valid.push(if d.is_some() { 1.0 } else { 0.0 });
-        }
-        (rays, rgb, disp, valid)
-    }
-
     fn render_context(&self) -> RenderContext<'_> {
         RenderContext {
-            field: &self.field,
-            space: &self.space,
-            near: self.near,
-            far: self.far,
-            samples_per_ray: self.config.sampler.samples_per_ray,
-            occupancy: self.occupancy.as_ref(),
-            background: self.background,
-            normals: self.config.render.normals,
+            field: &self.nerf.field,
+            space: &self.nerf.space,
+            near: self.nerf.near,
+            far: self.nerf.far,
+            samples_per_ray: self.nerf.config.sampler.samples_per_ray,
+            occupancy: self.nerf.occupancy.as_ref(),
+            background: self.nerf.background,
+            normals: self.nerf.config.render.normals,
         }
     }
 
@@ -495,7 +411,7 @@ impl GuidedTrainer {
         if !g.cache.contains_key(&view) {
             let v = ViewGuidance::new(
                 view,
-                &self.data.views[view],
+                &self.nerf.data.views[view],
                 margin,
                 g.prior.resolution,
                 g.prior.encoder.as_ref(),
@@ -546,7 +462,7 @@ impl GuidedTrainer {
         at: Option<(usize, Tensor<4>)>,
     ) -> Result<TermOutput, InpaintError> {
         self.view_guidance(view)?;
-        let seed = derive_seed(self.config.train.seed, step, modality.salt());
+        let seed = derive_seed(self.nerf.config.train.seed, step, modality.salt());
         let k = self.method.guide_every;
         let normal_start = self.normal_start();
         let (lambda, chain) = match modality {
@@ -611,7 +527,7 @@ impl GuidedTrainer {
         if !(do_rgb || do_normal) {
             return Ok((outs, records));
         }
-        let mut pick = ChaCha8Rng::seed_from_u64(derive_seed(self.config.train.seed, step, 0));
+        let mut pick = ChaCha8Rng::seed_from_u64(derive_seed(self.nerf.config.train.seed, step, 0));
         let view = g.views[pick.random_range(0..g.views.len())];
         if do_rgb {
             let t0 = Instant::now();
@@ -645,30 +561,10 @@ impl GuidedTrainer {
     /// One optimisation step (module docs); a non-finite loss skips the update.
     pub fn train_step(&mut self) -> Result<StepRecord, InpaintError> {
         let start = Instant::now();
-        let step = self.step;
-        let n = self.config.train.rays_per_batch;
-        let (rays, rgb, disp, valid) = self.batch_rays(n);
-        let device = self.field.device();
-        let (out, samples) = render_rays(
-            &self.field,
-            &self.space,
-            &rays,
-            self.config.sampler.samples_per_ray,
-            self.occupancy.as_ref(),
-            self.background,
-            Some(&mut self.rng),
-        );
-        let target = Tensor::<2>::from_data(TensorData::new(rgb, [n, 3]), &device);
-        let rgb_loss = mse(out.rgb, target);
-        let mut recon = rgb_loss.clone();
-        if self.has_depth && self.config.train.depth_weight > 0.0 {
-            let gt = Tensor::<1>::from_data(TensorData::new(disp, [n]), &device);
-            let valid = Tensor::<1>::from_data(TensorData::new(valid, [n]), &device);
-            let dl = disparity_loss(out.disparity, gt, valid, self.near);
-            recon = recon + dl.mul_scalar(self.config.train.depth_weight);
-        }
+        let step = self.nerf.step;
+        let recon = self.nerf.reconstruction_loss();
         let (terms, records) = self.guidance_terms(step)?;
-        let mut loss = recon.clone();
+        let mut loss = recon.loss.clone();
         for t in terms {
             loss = loss + t.loss;
         }
@@ -680,24 +576,23 @@ impl GuidedTrainer {
         {
             loss = loss.add_scalar(f32::NAN);
         }
-        let rgb_mse: f32 = rgb_loss.detach().into_scalar();
-        let recon_value: f32 = recon.detach().into_scalar();
+        let recon_value: f32 = recon.loss.detach().into_scalar();
         let loss_value: f32 = loss.clone().detach().into_scalar();
-        let lr = self.config.lr_at(step);
         let finite = |v: f32| v.is_finite().then_some(v as f64);
         let mut record = StepRecord {
             step,
             loss: finite(loss_value),
             recon_loss: finite(recon_value),
-            psnr: psnr_from_mse(rgb_mse as f64),
-            lr,
+            psnr: psnr_from_mse(recon.rgb_mse as f64),
+            lr: self.nerf.config.lr_at(step),
             skipped: false,
-            evaluations_per_ray: samples.evaluations_per_ray(),
+            evaluations_per_ray: recon.evaluations_per_ray,
             seconds: 0.0,
             guidance: records,
         };
-        self.step += 1;
-        if !loss_value.is_finite() {
+        if self.nerf.apply_loss(loss) {
+            self.nan_streak = 0;
+        } else {
             self.nan_streak += 1;
             record.skipped = true;
             tracing::warn!(
@@ -706,27 +601,9 @@ impl GuidedTrainer {
                 streak = self.nan_streak,
                 "non-finite loss: step skipped"
             );
-        } else {
-            self.nan_streak = 0;
-            let grads = GradientsParams::from_grads(loss.backward(), &self.field);
-            self.field = self.optimizer.step(lr, self.field.clone(), grads);
-            self.maybe_update_occupancy();
         }
         record.seconds = start.elapsed().as_secs_f64();
         Ok(record)
-    }
-
-    fn maybe_update_occupancy(&mut self) {
-        let Some(cfg) = self.config.sampler.occupancy.clone() else {
-            return;
-        };
-        let Some(grid) = self.occupancy.as_mut() else {
-            return;
-        };
-        if self.step >= cfg.warmup_steps && self.step.is_multiple_of(cfg.update_every) {
-            let valid = self.field.valid();
-            grid.update(&valid, cfg.cells_per_update, cfg.decay, &mut self.rng);
-        }
     }
 
     fn stop_message(&self) -> String {
@@ -743,9 +620,9 @@ impl GuidedTrainer {
     /// Trains until `config.train.steps` (module docs), writing the log, checkpoints and a
     /// progress bar as `opts` says.
     pub fn fit(&mut self, opts: &FitOptions) -> Result<FitSummary, InpaintError> {
-        let total = self.config.train.steps;
+        let total = self.nerf.config.train.steps;
         let start = Instant::now();
-        let first = self.step;
+        let first = self.nerf.step;
         let bar = if opts.progress {
             ProgressBar::new(total as u64)
         } else {
@@ -757,7 +634,7 @@ impl GuidedTrainer {
             )
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
         );
-        bar.set_position(self.step as u64);
+        bar.set_position(self.nerf.step as u64);
         let mut log = match &opts.log {
             Some(path) => {
                 if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -776,7 +653,7 @@ impl GuidedTrainer {
         };
         let mut summary = FitSummary::default();
         let mut evals = 0.0f64;
-        while self.step < total {
+        while self.nerf.step < total {
             let rec = self.train_step()?;
             evals += rec.evaluations_per_ray as f64;
             if rec.skipped {
@@ -794,13 +671,13 @@ impl GuidedTrainer {
                 let line = serde_json::to_string(&rec).unwrap_or_default();
                 writeln!(w, "{line}").map_err(|e| InpaintError::io(path.as_path(), e))?;
             }
-            let done = (self.step - first) as f64;
+            let done = (self.nerf.step - first) as f64;
             let guide = rec
                 .guidance
                 .iter()
                 .map(|g| format!(" {:?} t={:.2} |g|={:.2e}", g.modality, g.t, g.grad_norm))
                 .collect::<String>();
-            bar.set_position(self.step as u64);
+            bar.set_position(self.nerf.step as u64);
             bar.set_message(format!(
                 "loss {} psnr {:.2} dB {:.2} it/s{guide}",
                 rec.loss
@@ -816,17 +693,18 @@ impl GuidedTrainer {
                     checkpoint: self.stop_message(),
                 });
             }
-            let every = self.config.train.checkpoint_every;
+            let every = self.nerf.config.train.checkpoint_every;
             if let Some(path) = &opts.checkpoint {
-                let due = (every > 0 && self.step.is_multiple_of(every)) || self.step == total;
+                let due =
+                    (every > 0 && self.nerf.step.is_multiple_of(every)) || self.nerf.step == total;
                 if due && self.nan_streak == 0 {
                     self.save_checkpoint(path)?;
-                    self.last_good_checkpoint = Some((path.clone(), self.step));
+                    self.last_good_checkpoint = Some((path.clone(), self.nerf.step));
                 }
             }
         }
         bar.finish();
-        summary.steps_run = self.step - first;
+        summary.steps_run = self.nerf.step - first;
         summary.seconds = start.elapsed().as_secs_f64();
         summary.mean_evaluations_per_ray = if summary.steps_run > 0 {
             (evals / summary.steps_run as f64) as f32
@@ -841,57 +719,6 @@ impl GuidedTrainer {
             "training finished"
         );
         Ok(summary)
-    }
-
-    /// Writes a gb-nerf checkpoint atomically.
-    pub fn save_checkpoint(&self, path: &Path) -> Result<(), InpaintError> {
-        let e = |r: String| NerfError::Checkpoint {
-            path: path.to_path_buf(),
-            reason: r,
-        };
-        let model = self
-            .field
-            .clone()
-            .into_record()
-            .into_bytes()
-            .map_err(|x| e(x.to_string()))?;
-        let optimizer = self.optimizer.into_bytes().map_err(|x| e(x.to_string()))?;
-        checkpoint::save(
-            path,
-            &CheckpointParts {
-                meta: CheckpointMeta {
-                    step: self.step,
-                    config: self.config.clone(),
-                    occupancy_threshold: self.occupancy.as_ref().map(|g| g.density_threshold),
-                },
-                model: model.to_vec(),
-                optimizer: optimizer.to_vec(),
-                occupancy: self
-                    .occupancy
-                    .as_ref()
-                    .map(|g| g.density.clone())
-                    .unwrap_or_default(),
-            },
-        )?;
-        Ok(())
-    }
-
-    /// Renders a whole image (no autodiff) with the configured normals.
-    pub fn render(&self, camera: &Camera) -> ImageRender {
-        render_image(
-            &self.field,
-            camera,
-            &ImageSettings {
-                space: &self.space,
-                near: self.near,
-                far: self.far,
-                samples_per_ray: self.config.sampler.samples_per_ray,
-                occupancy: self.occupancy.as_ref(),
-                background: self.background,
-                normals: self.config.render.normals,
-                chunk: self.config.render.chunk,
-            },
-        )
     }
 }
 

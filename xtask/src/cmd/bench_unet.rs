@@ -49,7 +49,7 @@ pub struct Args {
 }
 
 /// SD-1.5-inpainting's `unet/config.json` (runwayml/stable-diffusion-inpainting).
-pub fn sd15_inpainting_unet() -> UNet2DConditionConfig {
+pub fn sd15_inpainting_unet() -> anyhow::Result<UNet2DConditionConfig> {
     serde_json::from_value(json!({
         "in_channels": 9, "out_channels": 4, "sample_size": 64, "layers_per_block": 2,
         "block_out_channels": [320, 640, 1280, 1280], "cross_attention_dim": 768,
@@ -57,18 +57,18 @@ pub fn sd15_inpainting_unet() -> UNet2DConditionConfig {
         "down_block_types": ["CrossAttnDownBlock2D", "CrossAttnDownBlock2D", "CrossAttnDownBlock2D", "DownBlock2D"],
         "up_block_types": ["UpBlock2D", "CrossAttnUpBlock2D", "CrossAttnUpBlock2D", "CrossAttnUpBlock2D"]
     }))
-    .expect("static config")
+    .map_err(|e| anyhow::anyhow!("built-in SD-1.5 config: {e}"))
 }
 
 /// SD-1.5's `vae/config.json`.
-pub fn sd15_vae() -> AutoencoderKLConfig {
+pub fn sd15_vae() -> anyhow::Result<AutoencoderKLConfig> {
     serde_json::from_value(json!({
         "block_out_channels": [128, 256, 512, 512], "layers_per_block": 2, "latent_channels": 4,
         "norm_num_groups": 32,
         "down_block_types": ["DownEncoderBlock2D", "DownEncoderBlock2D", "DownEncoderBlock2D", "DownEncoderBlock2D"],
         "up_block_types": ["UpDecoderBlock2D", "UpDecoderBlock2D", "UpDecoderBlock2D", "UpDecoderBlock2D"]
     }))
-    .expect("static config")
+    .map_err(|e| anyhow::anyhow!("built-in SD-1.5 config: {e}"))
 }
 
 fn peak_rss_mb() -> Option<f64> {
@@ -99,7 +99,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let kind = args.device.unwrap_or_default();
     let device = kind.device();
-    let cfg = sd15_inpainting_unet();
+    let cfg = sd15_inpainting_unet()?;
 
     tracing::info!(device = %kind, "building the SD-1.5-inpainting U-Net (random weights)");
     let unet = UNet2DConditionModel::new(&cfg, &device);
@@ -123,7 +123,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let ad = device.clone().autodiff();
     // Frozen weights, gradient to the image only, as the guidance step and the reference do.
-    let vae = AutoencoderKL::new(&sd15_vae(), &ad).no_grad();
+    let vae = AutoencoderKL::new(&sd15_vae()?, &ad).no_grad();
     let mut vae_times = serde_json::Map::new();
     for &size in &args.vae_sizes {
         tracing::info!(size, "VAE encoder forward+backward");

@@ -11,4 +11,4 @@ pub mod trainer;
 
 pub use config::{NerfConfig, RenderSettings, TrainSettings};
 pub use error::NerfError;
-pub use trainer::{FitSummary, StepStats, Trainer};
+pub use trainer::{FitSummary, ReconstructionLoss, StepStats, Trainer};

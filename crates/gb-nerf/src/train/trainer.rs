@@ -36,6 +36,16 @@ pub struct StepStats {
     pub evaluations_per_ray: f32,
 }
 
+/// The reconstruction loss of one ray batch ([`Trainer::reconstruction_loss`]).
+pub struct ReconstructionLoss {
+    /// RGB MSE plus the weighted disparity loss, with its graph.
+    pub loss: Tensor<1>,
+    /// The RGB MSE alone.
+    pub rgb_mse: f32,
+    /// Field evaluations per ray of the batch.
+    pub evaluations_per_ray: f32,
+}
+
 /// Summary of a [`Trainer::fit`] run.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FitSummary {
@@ -170,8 +180,10 @@ impl Trainer {
         (rays, rgb, disp, valid)
     }
 
-    /// One optimisation step.
-    pub fn train_step(&mut self) -> StepStats {
+    /// The reconstruction loss of one batch of unmasked training rays (RGB MSE, plus
+    /// `depth_weight` times the disparity loss where depth exists), with its autodiff graph.
+    /// Draws from the trainer's random stream; [`Self::apply_loss`] completes the step.
+    pub fn reconstruction_loss(&mut self) -> ReconstructionLoss {
         let n = self.config.train.rays_per_batch;
         let (rays, rgb, disp, valid) = self.batch_rays(n);
         let device = self.field.device();
@@ -193,17 +205,39 @@ impl Trainer {
             let dl = disparity_loss(out.disparity, gt, valid, self.near);
             loss = loss + dl.mul_scalar(self.config.train.depth_weight);
         }
-        let rgb_mse: f32 = rgb_loss.detach().into_scalar();
-        let loss_value: f32 = loss.clone().detach().into_scalar();
-        let grads = GradientsParams::from_grads(loss.backward(), &self.field);
+        ReconstructionLoss {
+            loss,
+            rgb_mse: rgb_loss.detach().into_scalar(),
+            evaluations_per_ray: samples.evaluations_per_ray(),
+        }
+    }
+
+    /// Completes a step with `loss` (the reconstruction loss plus any extra terms): one
+    /// backward pass, Adam at this step's learning rate, then the occupancy-grid update. The
+    /// step counter advances either way; a non-finite `loss` skips the update and returns
+    /// `false`.
+    pub fn apply_loss(&mut self, loss: Tensor<1>) -> bool {
+        let value: f32 = loss.clone().detach().into_scalar();
         let lr = self.config.lr_at(self.step);
-        self.field = self.optimizer.step(lr, self.field.clone(), grads);
         self.step += 1;
+        if !value.is_finite() {
+            return false;
+        }
+        let grads = GradientsParams::from_grads(loss.backward(), &self.field);
+        self.field = self.optimizer.step(lr, self.field.clone(), grads);
         self.maybe_update_occupancy();
+        true
+    }
+
+    /// One optimisation step ([`Self::reconstruction_loss`] then [`Self::apply_loss`]).
+    pub fn train_step(&mut self) -> StepStats {
+        let r = self.reconstruction_loss();
+        let loss_value: f32 = r.loss.clone().detach().into_scalar();
+        self.apply_loss(r.loss);
         StepStats {
             loss: loss_value as f64,
-            psnr: psnr_from_mse(rgb_mse as f64),
-            evaluations_per_ray: samples.evaluations_per_ray(),
+            psnr: psnr_from_mse(r.rgb_mse as f64),
+            evaluations_per_ray: r.evaluations_per_ray,
         }
     }
 
