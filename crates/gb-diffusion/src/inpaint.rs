@@ -45,6 +45,9 @@ pub enum InpaintError {
     /// Image and mask disagree, or the size does not fit the VAE.
     #[error("{0}")]
     Size(String),
+    /// A LoRA file could not be read or attached.
+    #[error(transparent)]
+    Lora(#[from] crate::lora::LoraError),
 }
 
 /// A loaded inpainting prior: tokenizer, text encoder, U-Net, VAE and DDIM schedule.
@@ -101,6 +104,36 @@ impl InpaintPrior {
         })
     }
 
+    /// Attaches the LoRA file `path` to the U-Net and the text encoder and merges it into
+    /// their weights. Returns the prior and the number of adapted weights (an error when the
+    /// file adapts none of them).
+    pub fn with_lora(mut self, path: &Path) -> Result<(Self, usize), InpaintError> {
+        use crate::checkpoint::keymap;
+        use crate::lora::{apply_lora, merge_lora, LoraComponent, LoraFile};
+        let file = LoraFile::read(path)?;
+        let section = if self.unet_config.use_linear_projection {
+            keymap::UNET_LINEAR_PROJECTION
+        } else {
+            keymap::UNET
+        };
+        let (u, n_unet) = apply_lora(self.unet, &file, LoraComponent::Unet, &section)?;
+        self.unet = merge_lora(u);
+        let (t, n_text) = apply_lora(
+            self.text_encoder,
+            &file,
+            LoraComponent::TextEncoder,
+            &keymap::TEXT_ENCODER,
+        )?;
+        self.text_encoder = merge_lora(t);
+        if n_unet + n_text == 0 {
+            return Err(InpaintError::Size(format!(
+                "LoRA file {}: none of its entries matches the U-Net or the text encoder",
+                path.display()
+            )));
+        }
+        Ok((self, n_unet + n_text))
+    }
+
     /// Text embeddings `[n, 77, d]` of `prompts` (`last_hidden_state`).
     pub fn encode_prompts(&self, prompts: &[&str]) -> Result<Tensor<3>, InpaintError> {
         let mut rows = Vec::with_capacity(prompts.len());
@@ -142,6 +175,11 @@ pub struct InpaintRequest {
     pub seed: u64,
     /// Initial latents `[1, 4, h / f, w / f]` (overrides `seed`; for parity runs).
     pub init_latents: Option<Vec<f32>>,
+    /// After each step, replace the known region of the latents by the image's latent
+    /// noised to the next timestep (with the initial noise), as diffusers' inpainting
+    /// pipeline does for 4-channel U-Nets (and RePaint without resampling). Off reproduces
+    /// diffusers' 9-channel pipeline exactly.
+    pub blend_known: bool,
 }
 
 /// The prepared conditioning: latent-size binary mask and scaled masked-image latent.
@@ -256,9 +294,31 @@ pub fn inpaint(
     } else {
         (prior.encode_prompts(&[req.prompt.as_str()])?, 1)
     };
-    let mask = cond.mask_latent.repeat_dim(0, batch);
+    // the image's own latent (known region) and the initial noise, for `blend_known`
+    let known = if req.blend_known {
+        let mut img = vec![0f32; 3 * req.height * req.width];
+        let hw = req.height * req.width;
+        for p in 0..hw {
+            for c in 0..3 {
+                img[c * hw + p] = req.rgb[p * 3 + c] * 2.0 - 1.0;
+            }
+        }
+        let img =
+            Tensor::<4>::from_data(TensorData::new(img, [1, 3, req.height, req.width]), device);
+        Some((
+            prior
+                .vae
+                .encode_mean(img)
+                .mul_scalar(prior.vae.scaling_factor),
+            latents.clone(),
+        ))
+    } else {
+        None
+    };
+    let timesteps = scheduler.timesteps.clone();
+    let mask = cond.mask_latent.clone().repeat_dim(0, batch);
     let mil = cond.masked_image_latents.repeat_dim(0, batch);
-    for (i, &t) in scheduler.timesteps.clone().iter().enumerate() {
+    for (i, &t) in timesteps.iter().enumerate() {
         let input = Tensor::cat(
             vec![
                 latents.clone().repeat_dim(0, batch),
@@ -276,6 +336,14 @@ pub fn inpaint(
             eps
         };
         latents = scheduler.step(eps, t, latents)?;
+        if let Some((z0, noise)) = &known {
+            let target = match timesteps.get(i + 1) {
+                Some(&next) => scheduler.add_noise(z0.clone(), noise.clone(), &[next])?,
+                None => z0.clone(),
+            };
+            let hole = cond.mask_latent.clone();
+            latents = latents * hole.clone() + target * hole.neg().add_scalar(1.0);
+        }
         on_step(i, t);
     }
     let image = prior

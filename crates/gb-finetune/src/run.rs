@@ -100,6 +100,8 @@ pub fn validation_settings(cfg: &FinetuneConfig) -> ValidationSettings {
         resolution: cfg.resolution,
         samples: cfg.validation_samples,
         ddim_steps: cfg.validation_ddim_steps,
+        average: cfg.validation_average,
+        blend_known: cfg.validation_blend_known,
         mode: cfg.mode,
         normals: !cfg.rgb_only,
         seed: cfg.seed ^ 0x7661_6c69,

@@ -23,6 +23,8 @@ enum What {
     Unet(super::bench_unet::Args),
     /// One guidance step of SDS, CSD and BSD, and BSD's saving over CSD.
     Distill(super::distill_bench::Args),
+    /// Object-removal quality of every method on the procedural scenes, against `none`.
+    Quality(super::bench_quality::Args),
 }
 
 /// Runs the chosen benchmark.
@@ -32,6 +34,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         What::Nerf(a) => super::bench_nerf::run(a),
         What::Unet(a) => super::bench_unet::run(a),
         What::Distill(a) => super::distill_bench::run(a),
+        What::Quality(a) => super::bench_quality::run(a),
     }
 }
 

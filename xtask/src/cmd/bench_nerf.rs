@@ -7,8 +7,11 @@
 //! evaluated, as in the PyTorch reference (`tools/nerf_parity/bench_torch.py`, dense
 //! samples on random rays in a unit box).
 //!
-//! Accuracy (`--accuracy`, slow): each preset trained to completion on flex, with the wall
-//! time and the test-view PSNR on pixels outside the masks.
+//! Accuracy (`--accuracy`, slow): each preset of `--accuracy-presets` trained to completion
+//! on flex on each scene of `--accuracy-scenes`, with the wall time and the test-view PSNR on
+//! pixels outside the masks. `stairs` holds out its object-free test views; `fern`
+//! (`$GB_TEST_DATA/data/fern`, or a path given as `fern=DIR`) holds out every 8th view, the
+//! NeRF `llffhold = 8` convention. Each point is written as soon as it is measured.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -32,7 +35,7 @@ pub struct Args {
     /// Comma-separated backends.
     #[arg(long, default_value = "ndarray,flex,wgpu")]
     pub devices: String,
-    /// Timed steps per preset and backend.
+    /// Timed steps per preset and backend (0: no speed rows).
     #[arg(long, default_value_t = 5)]
     pub steps: usize,
     /// Python with torch for the reference (default: $GB_PYTHON, then /work/pyref/bin/python).
@@ -41,6 +44,13 @@ pub struct Args {
     /// Also train every preset to completion on flex and record PSNR against wall time.
     #[arg(long)]
     pub accuracy: bool,
+    /// Presets of the accuracy points.
+    #[arg(long, default_value = "fast,balanced")]
+    pub accuracy_presets: String,
+    /// Scenes of the accuracy points: `stairs`, `fern`, or `NAME=DIR` for an LLFF folder
+    /// (every 8th view held out).
+    #[arg(long, default_value = "stairs,fern")]
+    pub accuracy_scenes: String,
     /// Output folder.
     #[arg(long, default_value = "bench/results")]
     pub out: PathBuf,
@@ -53,6 +63,38 @@ fn stairs(dir: &std::path::Path) -> anyhow::Result<Scene> {
     };
     procedural::write(&opts, dir).context("generating stairs")?;
     Ok(gb_nerf::scene::load(dir, &LoadOptions::default())?.1)
+}
+
+/// An accuracy scene by name: the generated `stairs`, or an LLFF folder with every 8th view
+/// held out (`fern` is `$GB_TEST_DATA/data/fern`).
+fn accuracy_scene(spec: &str, stairs_scene: &Scene) -> anyhow::Result<Scene> {
+    let (name, dir) = match spec.split_once('=') {
+        Some((n, d)) => (n, PathBuf::from(d)),
+        None if spec == "stairs" => return Ok(stairs_scene.clone()),
+        None if spec == "fern" => ("fern", gb_core::test_data_dir().join("data/fern")),
+        None => anyhow::bail!("unknown accuracy scene '{spec}': use stairs, fern or NAME=DIR"),
+    };
+    let mut opts = LoadOptions::default();
+    opts.llff.holdout_every = Some(8);
+    let (_, scene) = gb_nerf::scene::load(&dir, &opts)
+        .with_context(|| format!("loading accuracy scene {name} from {}", dir.display()))?;
+    Ok(scene)
+}
+
+/// Mean test-view PSNR on pixels outside the masks.
+fn test_psnr(t: &Trainer, scene: &Scene) -> anyhow::Result<f64> {
+    let mut vals = Vec::new();
+    for view in scene.split(Split::Test) {
+        let v = prepare_view(view, t.config.train.image_downscale);
+        let r = t.render(&v.camera);
+        let region = match &v.mask {
+            Some(m) => Region::Mask(m.data.iter().map(|b| !b).collect()),
+            None => Region::Full,
+        };
+        vals.push(psnr(&r.rgb, &v.image, &region)?);
+    }
+    anyhow::ensure!(!vals.is_empty(), "the scene has no test views");
+    Ok(vals.iter().sum::<f64>() / vals.len() as f64)
 }
 
 fn torch_reference(
@@ -113,7 +155,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|s| s.parse())
         .collect::<Result<_, _>>()?;
     let mut rows = Vec::new();
-    for preset in args.presets.split(',') {
+    // `--steps 0` skips the speed rows (accuracy points only).
+    let speed_presets: Vec<&str> = match args.steps {
+        0 => Vec::new(),
+        _ => args.presets.split(',').collect(),
+    };
+    for preset in speed_presets {
         let cfg = NerfConfig::preset(preset.trim())?;
         for &device in &devices {
             let mut t = Trainer::new(&scene, cfg.clone(), device)?;
@@ -145,38 +192,41 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         rows.push(json!({ "preset": preset, "device": "pytorch-cpu", "reference": torch }));
     }
-    let mut accuracy = Vec::new();
-    if args.accuracy {
-        for preset in args.presets.split(',') {
-            let cfg = NerfConfig::preset(preset.trim())?;
-            let mut t = Trainer::new(&scene, cfg, BackendKind::Flex)?;
-            let s = t.fit(None, true)?;
-            let mut vals = Vec::new();
-            for view in scene.split(Split::Test) {
-                let v = prepare_view(view, t.config.train.image_downscale);
-                let r = t.render(&v.camera);
-                let region = match &v.mask {
-                    Some(m) => Region::Mask(m.data.iter().map(|b| !b).collect()),
-                    None => Region::Full,
-                };
-                vals.push(psnr(&r.rgb, &v.image, &region)?);
-            }
-            let mean = vals.iter().sum::<f64>() / vals.len().max(1) as f64;
-            accuracy.push(
-                json!({ "preset": preset, "scene": "stairs", "device": "flex",
-                "train_seconds": s.seconds, "psnr_unmasked": mean }),
-            );
-        }
-    }
     let stamp = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)?
         .as_secs();
     let path = args.out.join(format!("nerf-{stamp}.json"));
-    let report = json!({
+    let mut report = json!({
         "benchmark": "nerf", "machine": super::bench::machine_description(),
         "scene": "stairs 200x150 (procedural)", "timed_steps": args.steps,
-        "speed": rows, "accuracy": accuracy,
+        "speed": rows, "accuracy": [],
     });
+    if args.accuracy {
+        for spec in args.accuracy_scenes.split(',') {
+            let acc_scene = accuracy_scene(spec.trim(), &scene)?;
+            let name = spec.split('=').next().unwrap_or(spec).trim();
+            for preset in args.accuracy_presets.split(',') {
+                let cfg = NerfConfig::preset(preset.trim())?;
+                let mut t = Trainer::new(&acc_scene, cfg, BackendKind::Flex)?;
+                let s = t.fit(None, true)?;
+                let mean = test_psnr(&t, &acc_scene)?;
+                tracing::info!(
+                    scene = name,
+                    preset,
+                    psnr = mean,
+                    seconds = s.seconds,
+                    "nerf accuracy"
+                );
+                if let Some(a) = report["accuracy"].as_array_mut() {
+                    a.push(json!({ "preset": preset, "scene": name, "device": "flex",
+                        "steps": t.config.train.steps, "train_seconds": s.seconds,
+                        "test_views": acc_scene.split(Split::Test).count(),
+                        "psnr_test_unmasked": mean }));
+                }
+                gb_core::write_atomic(&path, &serde_json::to_vec_pretty(&report)?)?;
+            }
+        }
+    }
     gb_core::write_atomic(&path, &serde_json::to_vec_pretty(&report)?)?;
     println!("{}", serde_json::to_string_pretty(&report)?);
     println!("wrote {}", path.display());

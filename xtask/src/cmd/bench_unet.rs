@@ -28,7 +28,7 @@ pub struct Args {
     #[arg(long, default_value_t = 2)]
     batch: usize,
     /// Image sides for the VAE encoder forward+backward.
-    #[arg(long, default_values_t = vec![256usize])]
+    #[arg(long, value_delimiter = ',', default_values_t = vec![256usize])]
     vae_sizes: Vec<usize>,
     /// Timed repetitions after one warm-up (the fastest is kept).
     #[arg(long, default_value_t = 1)]

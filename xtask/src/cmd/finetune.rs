@@ -16,12 +16,14 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use gb_core::BackendKind;
 use gb_diffusion::checkpoint::hub;
+use gb_diffusion::inpaint::InpaintPrior;
 use gb_finetune::captions::CaptionMode;
 use gb_finetune::diode::{DiodeDataset, DiodeSplit};
-use gb_finetune::run::{run_finetune, RunOptions};
+use gb_finetune::run::{run_finetune, validation_settings, RunOptions};
 use gb_finetune::sample::PairSource;
 use gb_finetune::synthetic::SyntheticPairs;
 use gb_finetune::tiny_prior::run_recipe;
+use gb_finetune::train::validate::validate;
 use gb_finetune::train::{FinetuneConfig, PriorModels};
 
 /// Arguments of `cargo xtask finetune`.
@@ -90,6 +92,23 @@ pub struct Args {
     /// Held-out samples per validation.
     #[arg(long)]
     pub validation_samples: Option<usize>,
+    /// Samples averaged per hole for the posterior-mean validation score (default 1).
+    #[arg(long)]
+    pub validation_average: Option<usize>,
+    /// Only validate `--base` (with `--lora` when given, else the folder's own
+    /// `pytorch_lora_weights.safetensors` when present) on the held-out pairs, write
+    /// `OUT/validation.json`, and exit.
+    #[arg(long)]
+    pub validate_only: bool,
+    /// A LoRA file for `--validate-only`.
+    #[arg(long, requires = "validate_only")]
+    pub lora: Option<PathBuf>,
+    /// DDIM steps of the validation sampler.
+    #[arg(long)]
+    pub validation_ddim_steps: Option<usize>,
+    /// Validation samples keep the known region (RePaint-style blending after each step).
+    #[arg(long)]
+    pub validation_blend_known: bool,
     /// Compute backend: ndarray, flex or wgpu.
     #[arg(long, default_value = "flex")]
     pub device: BackendKind,
@@ -155,10 +174,15 @@ fn config_of(args: &Args, native: usize) -> anyhow::Result<FinetuneConfig> {
         seed,
         checkpoint_every,
         validate_every,
-        validation_samples
+        validation_samples,
+        validation_average,
+        validation_ddim_steps
     );
     if args.no_text_encoder {
         cfg.train_text_encoder = false;
+    }
+    if args.validation_blend_known {
+        cfg.validation_blend_known = true;
     }
     cfg.validate()?;
     Ok(cfg)
@@ -206,6 +230,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         } else {
             bail!("choose the data: --diode DIR, --synthetic or --pairs DIR");
         };
+    if args.validate_only {
+        let val = val.context(
+            "--validate-only needs held-out data (--synthetic, or --diode DIR with val/)",
+        )?;
+        return validate_only(&args, &base_dir, val.as_ref(), &plain);
+    }
     let models = PriorModels::load(&base_dir, &device)?;
     let native = models.unet_config.sample_size.unwrap_or(64) * models.vae_factor;
     let cfg = config_of(&args, native)?;
@@ -224,6 +254,65 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
     )?;
     println!("{}", serde_json::to_string_pretty(&summary)?);
+    Ok(())
+}
+
+/// `--validate-only`: the base with and without its LoRA, and the fill baselines, on the
+/// held-out pairs.
+fn validate_only(
+    args: &Args,
+    base_dir: &Path,
+    val: &dyn PairSource,
+    plain: &burn::tensor::Device,
+) -> anyhow::Result<()> {
+    let load = || {
+        InpaintPrior::load(base_dir, plain)
+            .with_context(|| format!("loading the prior {}", base_dir.display()))
+    };
+    let prior = load()?;
+    let native = prior.unet_config.sample_size.unwrap_or(64) * prior.vae_scale_factor;
+    let mut cfg = config_of(args, native)?;
+    if args.config.is_none() && args.validation_samples.is_none() {
+        cfg.validation_samples = val.len();
+    }
+    let lora = args.lora.clone().or_else(|| {
+        let own = base_dir.join("pytorch_lora_weights.safetensors");
+        own.is_file().then_some(own)
+    });
+    let mut settings = validation_settings(&cfg);
+    settings.normals = true;
+    let started = std::time::Instant::now();
+    let base_report = validate(&prior, val, &settings)?;
+    tracing::info!(?base_report, "validation of the base");
+    let lora_report = match &lora {
+        Some(path) => {
+            let (with, n) = load()?
+                .with_lora(path)
+                .with_context(|| format!("attaching {}", path.display()))?;
+            tracing::info!(adapted = n, "LoRA {}", path.display());
+            Some(validate(&with, val, &settings)?)
+        }
+        None => None,
+    };
+    let report = serde_json::json!({
+        "prior": base_dir.display().to_string(),
+        "lora": lora.as_ref().map(|p| p.display().to_string()),
+        "samples": settings.samples.min(val.len()),
+        "averaged_samples": settings.average,
+        "ddim_steps": settings.ddim_steps,
+        "blend_known": settings.blend_known,
+        "resolution": settings.resolution,
+        "mode": cfg.mode,
+        "seconds": started.elapsed().as_secs_f64(),
+        "base": base_report,
+        "with_lora": lora_report,
+    });
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let path = args.out.join("validation.json");
+    gb_core::write_atomic(&path, &serde_json::to_vec_pretty(&report)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
 }
 

@@ -39,6 +39,10 @@ pub struct Args {
     /// Output PNG.
     #[arg(long)]
     out: PathBuf,
+    /// Keep the known region on the image's noised latent after each step (RePaint-style
+    /// blending; off: diffusers' 9-channel pipeline exactly).
+    #[arg(long)]
+    blend_known: bool,
     /// Backend: ndarray, flex (default) or wgpu.
     #[arg(long)]
     device: Option<BackendKind>,
@@ -83,6 +87,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         guidance: args.guidance,
         seed: args.seed,
         init_latents: None,
+        blend_known: args.blend_known,
     };
     let bar = ProgressBar::new(args.steps as u64);
     bar.set_style(

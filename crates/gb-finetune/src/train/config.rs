@@ -62,6 +62,11 @@ pub struct FinetuneConfig {
     pub validation_samples: usize,
     /// DDIM steps of the validation sampler.
     pub validation_ddim_steps: usize,
+    /// Samples averaged per hole for the posterior-mean score (1: single sample only; see
+    /// [`crate::train::validate`]).
+    pub validation_average: usize,
+    /// Validation samples with the known region blended in after each DDIM step.
+    pub validation_blend_known: bool,
     /// Smallest hole as a fraction of the image.
     pub mask_min_coverage: f32,
     /// Largest hole as a fraction of the image.
@@ -89,6 +94,8 @@ impl Default for FinetuneConfig {
             validate_every: 500,
             validation_samples: 4,
             validation_ddim_steps: 20,
+            validation_average: 1,
+            validation_blend_known: false,
             mask_min_coverage: 0.05,
             mask_max_coverage: 0.5,
         }
@@ -118,6 +125,9 @@ impl FinetuneConfig {
         }
         if self.target == TrainTarget::Lora && self.rank == 0 {
             return bad("rank", "a LoRA needs rank >= 1".into());
+        }
+        if self.validation_average == 0 {
+            return bad("validation_average", "must be at least 1".into());
         }
         if self.resolution < 8 {
             return bad("resolution", format!("{} is too small", self.resolution));
