@@ -98,7 +98,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let p = runs.join(file);
             let text =
                 std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
-            Ok(serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))?)
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))
         };
         let baselines = read("baselines.json")?;
         let ablation = read("ablation.json")?;
@@ -123,4 +123,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("wrote {}", path.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vs_none_compares_each_column_in_its_direction() {
+        let table = json!({
+            "columns": [
+                {"key": "ssim_bbox", "higher_is_better": true},
+                {"key": "lpips_bbox", "higher_is_better": false},
+                {"key": "depth_psnr", "higher_is_better": true},
+            ],
+            "rows": [
+                {"label": "none", "method": "none", "ssim_bbox": 0.60, "lpips_bbox": 0.30, "depth_psnr": 20.0},
+                {"label": "GB-NeRF", "method": "gb-nerf", "ssim_bbox": 0.65, "lpips_bbox": 0.35, "depth_psnr": null},
+            ],
+        });
+        let v = vs_none(&table);
+        assert_eq!(v["GB-NeRF"]["ssim_bbox"], json!(true));
+        assert_eq!(v["GB-NeRF"]["lpips_bbox"], json!(false));
+        assert!(v["GB-NeRF"].get("depth_psnr").is_none(), "{v}");
+        assert!(v.get("none").is_none());
+        let no_reference = json!({"columns": [], "rows": [{"label": "x", "method": "bsd"}]});
+        assert_eq!(vs_none(&no_reference), Value::Null);
+    }
 }
