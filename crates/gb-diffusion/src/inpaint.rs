@@ -108,30 +108,16 @@ impl InpaintPrior {
     /// their weights. Returns the prior and the number of adapted weights (an error when the
     /// file adapts none of them).
     pub fn with_lora(mut self, path: &Path) -> Result<(Self, usize), InpaintError> {
-        use crate::checkpoint::keymap;
-        use crate::lora::{apply_lora, merge_lora, LoraComponent, LoraFile};
-        let file = LoraFile::read(path)?;
-        let section = if self.unet_config.use_linear_projection {
-            keymap::UNET_LINEAR_PROJECTION
-        } else {
-            keymap::UNET
-        };
-        let (u, n_unet) = apply_lora(self.unet, &file, LoraComponent::Unet, &section)?;
-        self.unet = merge_lora(u);
-        let (t, n_text) = apply_lora(
+        let file = crate::lora::LoraFile::read(path)?;
+        let merged = crate::lora::merge_pipeline_lora(
+            self.unet,
+            &self.unet_config,
             self.text_encoder,
             &file,
-            LoraComponent::TextEncoder,
-            &keymap::TEXT_ENCODER,
         )?;
-        self.text_encoder = merge_lora(t);
-        if n_unet + n_text == 0 {
-            return Err(InpaintError::Size(format!(
-                "LoRA file {}: none of its entries matches the U-Net or the text encoder",
-                path.display()
-            )));
-        }
-        Ok((self, n_unet + n_text))
+        self.unet = merged.unet;
+        self.text_encoder = merged.text_encoder;
+        Ok((self, merged.unet_weights + merged.text_encoder_weights))
     }
 
     /// Text embeddings `[n, 77, d]` of `prompts` (`last_hidden_state`).
@@ -215,13 +201,11 @@ pub fn prepare_conditioning(
         .iter()
         .map(|&m| if m >= 0.5 { 1.0 } else { 0.0 })
         .collect();
-    let mut masked = vec![0f32; 3 * h * w];
-    for y in 0..h {
-        for x in 0..w {
-            let keep = binary[y * w + x] < 0.5;
-            for c in 0..3 {
-                let v = req.rgb[(y * w + x) * 3 + c] * 2.0 - 1.0;
-                masked[c * h * w + y * w + x] = if keep { v } else { 0.0 };
+    let mut masked = image_chw(req);
+    for plane in masked.chunks_mut(h * w) {
+        for (v, m) in plane.iter_mut().zip(&binary) {
+            if *m >= 0.5 {
+                *v = 0.0;
             }
         }
     }
@@ -242,6 +226,18 @@ pub fn prepare_conditioning(
         mask_latent: Tensor::from_data(TensorData::new(small, [1, 1, lh, lw]), device),
         masked_image_latents,
     })
+}
+
+/// The request's image as `[3, h, w]` planes in `[-1, 1]` (the VAE's input range).
+fn image_chw(req: &InpaintRequest) -> Vec<f32> {
+    let hw = req.width * req.height;
+    let mut out = vec![0f32; 3 * hw];
+    for p in 0..hw {
+        for c in 0..3 {
+            out[c * hw + p] = req.rgb[p * 3 + c] * 2.0 - 1.0;
+        }
+    }
+    out
 }
 
 /// Standard-normal values from a seeded ChaCha8 generator (Box-Muller), identical on
@@ -296,15 +292,10 @@ pub fn inpaint(
     };
     // the image's own latent (known region) and the initial noise, for `blend_known`
     let known = if req.blend_known {
-        let mut img = vec![0f32; 3 * req.height * req.width];
-        let hw = req.height * req.width;
-        for p in 0..hw {
-            for c in 0..3 {
-                img[c * hw + p] = req.rgb[p * 3 + c] * 2.0 - 1.0;
-            }
-        }
-        let img =
-            Tensor::<4>::from_data(TensorData::new(img, [1, 3, req.height, req.width]), device);
+        let img = Tensor::<4>::from_data(
+            TensorData::new(image_chw(req), [1, 3, req.height, req.width]),
+            device,
+        );
         Some((
             prior
                 .vae

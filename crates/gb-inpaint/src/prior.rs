@@ -16,14 +16,14 @@ use std::path::{Path, PathBuf};
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
-use gb_diffusion::checkpoint::{keymap, DiffusersFolder, WeightVariant};
+use gb_diffusion::checkpoint::{DiffusersFolder, WeightVariant};
 use gb_diffusion::clip::{load_text_encoder, ClipTextModel};
 use gb_diffusion::config::SchedulerConfig;
 use gb_diffusion::distill::sd_adapter::{SdUnetEps, SdVaeEncoder};
 use gb_diffusion::distill::{
     AlphasCumprod, DistillError, InpaintEpsPredictor, LatentEncoder, PromptEncoder,
 };
-use gb_diffusion::lora::{apply_lora, merge_lora, LoraComponent, LoraFile};
+use gb_diffusion::lora::{merge_pipeline_lora, LoraFile};
 use gb_diffusion::models::{load_unet, load_vae};
 use gb_diffusion::tokenizer::ClipTokenizer;
 use serde::Serialize;
@@ -179,29 +179,10 @@ impl GuidancePrior {
 
         let (mut n_unet, mut n_text) = (0, 0);
         if let Some(file) = &lora_file {
-            let section = if unet_cfg.use_linear_projection {
-                keymap::UNET_LINEAR_PROJECTION
-            } else {
-                keymap::UNET
-            };
-            let (u, n) =
-                apply_lora(unet, file, LoraComponent::Unet, &section).map_err(|e| lora_err(&e))?;
-            unet = merge_lora(u);
-            n_unet = n;
-            let (t, n) = apply_lora(
-                text,
-                file,
-                LoraComponent::TextEncoder,
-                &keymap::TEXT_ENCODER,
-            )
-            .map_err(|e| lora_err(&e))?;
-            text = merge_lora(t);
-            n_text = n;
-            if n_unet + n_text == 0 {
-                return Err(lora_err(
-                    &"no entry for the U-Net or the text encoder (nothing to attach)",
-                ));
-            }
+            let merged =
+                merge_pipeline_lora(unet, &unet_cfg, text, file).map_err(|e| lora_err(&e))?;
+            (unet, text) = (merged.unet, merged.text_encoder);
+            (n_unet, n_text) = (merged.unet_weights, merged.text_encoder_weights);
             tracing::info!(
                 lora = %file.path.display(),
                 unet_weights = n_unet,

@@ -9,6 +9,7 @@ pub mod apply;
 pub mod conv_adapter;
 pub mod error;
 pub mod file;
+mod pipeline;
 pub mod tensor_io;
 pub mod write;
 
@@ -16,4 +17,5 @@ pub use apply::{apply_lora, merge_lora, LoraComponent};
 pub use conv_adapter::ConvLoraAdapter;
 pub use error::LoraError;
 pub use file::{LoraEntry, LoraFile};
+pub use pipeline::{merge_pipeline_lora, MergedLora};
 pub use write::{collect_lora, write_peft_lora, CollectedLora, LoraExport};
