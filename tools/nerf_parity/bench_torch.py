@@ -1,9 +1,9 @@
-"""Plain-PyTorch CPU reference for `cargo xtask bench nerf`: the same hash-grid field,
+"""Plain-PyTorch reference (CPU, or CUDA with --device cuda) for `cargo xtask bench nerf`: the same hash-grid field,
 stratified samples and volume rendering as gb-nerf, one Adam step per iteration on random
 rays in a unit box. Prints one JSON line: {"steps_per_s": ..., "rays_per_s": ...}.
 
 Pinned: torch==2.15.0 (tools/requirements.txt). Usage:
-    python tools/nerf_parity/bench_torch.py --config CONFIG.json --steps 10
+    python tools/nerf_parity/bench_torch.py --config CONFIG.json --steps 10 [--device cuda]
 CONFIG.json: {"levels", "features_per_level", "log2_table_size", "base_resolution",
 "max_resolution", "hidden", "geo_features", "dir_freqs", "samples_per_ray", "rays_per_batch"}
 """
@@ -29,7 +29,7 @@ def lookups(x, levels, log2_t, base, max_res):
         f = pos - g
         g = g.long()
         for c in range(8):
-            bits = torch.tensor([(c >> i) & 1 for i in range(3)])
+            bits = torch.tensor([(c >> i) & 1 for i in range(3)], device=x.device)
             w = torch.prod(torch.where(bits.bool(), f, 1.0 - f), 1)
             gc = g + bits
             if res ** 3 <= T:
@@ -53,9 +53,12 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--config", required=True)
     ap.add_argument("--steps", type=int, default=10)
+    ap.add_argument("--device", default="cpu")
     a = ap.parse_args()
     c = json.load(open(a.config))
     torch.manual_seed(0)
+    dev = torch.device(a.device)
+    torch.set_default_device(dev)
     L, Fd = c["levels"], c["features_per_level"]
     table = torch.nn.Parameter(torch.rand(L << c["log2_table_size"], Fd) * 2e-4 - 1e-4)
     H, G = c["hidden"], c["geo_features"]
@@ -86,14 +89,24 @@ def main():
         loss.backward()
         opt.step()
 
+    def sync():
+        if dev.type == "cuda":
+            torch.cuda.synchronize()
+
     for _ in range(2):
         step()
+    sync()
     t0 = time.perf_counter()
     for _ in range(a.steps):
         step()
+    sync()
     dt = time.perf_counter() - t0
-    print(json.dumps({"steps_per_s": a.steps / dt, "rays_per_s": a.steps * R / dt,
-                      "threads": torch.get_num_threads(), "torch": torch.__version__}))
+    out = {"steps_per_s": a.steps / dt, "rays_per_s": a.steps * R / dt,
+           "threads": torch.get_num_threads(), "torch": torch.__version__, "device": a.device}
+    if dev.type == "cuda":
+        out["gpu"] = torch.cuda.get_device_name(0)
+        out["peak_gpu_mb"] = torch.cuda.max_memory_allocated() / 2**20
+    print(json.dumps(out))
 
 
 if __name__ == "__main__":

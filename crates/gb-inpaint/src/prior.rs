@@ -18,13 +18,15 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use gb_diffusion::checkpoint::{DiffusersFolder, WeightVariant};
 use gb_diffusion::clip::{load_text_encoder, ClipTextModel};
-use gb_diffusion::config::SchedulerConfig;
+use gb_diffusion::config::{
+    AutoencoderKLConfig, ClipTextConfig, SchedulerConfig, UNet2DConditionConfig,
+};
 use gb_diffusion::distill::sd_adapter::{SdUnetEps, SdVaeEncoder};
 use gb_diffusion::distill::{
     AlphasCumprod, DistillError, InpaintEpsPredictor, LatentEncoder, PromptEncoder,
 };
 use gb_diffusion::lora::{merge_pipeline_lora, LoraFile};
-use gb_diffusion::models::{load_unet, load_vae};
+use gb_diffusion::models::{load_unet, load_vae, AutoencoderKL, UNet2DConditionModel};
 use gb_diffusion::tokenizer::ClipTokenizer;
 use serde::Serialize;
 
@@ -217,6 +219,54 @@ impl GuidancePrior {
             alphas,
             resolution,
             info,
+        })
+    }
+
+    /// A prior of the given shapes with random weights (no files but the tokenizer at
+    /// `tokenizer_dir`), for benchmarks at a real model's size, such as SD-1.5-inpainting's,
+    /// where no checkpoint is at hand. Its scores are meaningless; its cost is the real one.
+    pub fn random(
+        unet: &UNet2DConditionConfig,
+        vae: &AutoencoderKLConfig,
+        text: &ClipTextConfig,
+        tokenizer_dir: &Path,
+        device: &Device,
+    ) -> Result<Self, InpaintError> {
+        let prior_err = |component: &str, e: &dyn std::fmt::Display| InpaintError::Prior {
+            path: tokenizer_dir.to_path_buf(),
+            reason: format!("{component}: {e}"),
+        };
+        let tokenizer =
+            ClipTokenizer::from_dir(tokenizer_dir).map_err(|e| prior_err("tokenizer", &e))?;
+        let sched = SchedulerConfig::default();
+        let alphas = AlphasCumprod::from_config(&sched).map_err(|e| prior_err("scheduler", &e))?;
+        let factor = vae.scale_factor();
+        let resolution = unet.sample_size.unwrap_or(64) * factor;
+        let vae_model = AutoencoderKL::new(vae, &device.clone().autodiff());
+        Ok(Self {
+            unet: Box::new(SdUnetEps::new(
+                UNet2DConditionModel::new(unet, device),
+                unet.in_channels,
+                sched.prediction_type,
+                alphas.clone(),
+            )),
+            encoder: Box::new(SdVaeEncoder::new(vae_model.no_grad(), factor)),
+            text: Box::new(ClipEncoder {
+                tokenizer,
+                model: ClipTextModel::new(text, device),
+                device: device.clone(),
+            }),
+            info: PriorInfo {
+                folder: PathBuf::from("random-weights"),
+                lora: None,
+                lora_unet_weights: 0,
+                lora_text_encoder_weights: 0,
+                resolution,
+                vae_factor: factor,
+                num_train_timesteps: alphas.len(),
+            },
+            alphas,
+            resolution,
         })
     }
 }

@@ -25,6 +25,8 @@ enum What {
     Distill(super::distill_bench::Args),
     /// Object-removal quality of every method on the procedural scenes, against `none`.
     Quality(super::bench_quality::Args),
+    /// One GB-NeRF training step per phase at a preset, with an SD-1.5-sized prior.
+    Pipeline(super::bench_pipeline::Args),
 }
 
 /// Runs the chosen benchmark.
@@ -35,6 +37,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         What::Unet(a) => super::bench_unet::run(a),
         What::Distill(a) => super::distill_bench::run(a),
         What::Quality(a) => super::bench_quality::run(a),
+        What::Pipeline(a) => super::bench_pipeline::run(a),
     }
 }
 

@@ -1,5 +1,5 @@
 //! `cargo xtask bench nerf`: NeRF training speed per preset and backend, against the same
-//! configuration in plain PyTorch on this CPU (same run), written to
+//! configuration in plain PyTorch on this machine (same run; `--torch-device cuda` on a GPU), written to
 //! `bench/results/nerf-<timestamp>.json`.
 //!
 //! Speed: after 2 warm-up steps, `--steps` training steps on the procedural `stairs` scene
@@ -8,7 +8,7 @@
 //! samples on random rays in a unit box).
 //!
 //! Accuracy (`--accuracy`, slow): each preset of `--accuracy-presets` trained to completion
-//! on flex on each scene of `--accuracy-scenes`, with the wall time and the test-view PSNR on
+//! on `--accuracy-device` (flex by default) on each scene of `--accuracy-scenes`, with the wall time and the test-view PSNR on
 //! pixels outside the masks. `stairs` holds out its object-free test views; `fern`
 //! (`$GB_TEST_DATA/data/fern`, or a path given as `fern=DIR`) holds out every 8th view, the
 //! NeRF `llffhold = 8` convention. Each point is written as soon as it is measured.
@@ -41,6 +41,12 @@ pub struct Args {
     /// Python with torch for the reference (default: $GB_PYTHON, then /work/pyref/bin/python).
     #[arg(long)]
     pub python: Option<PathBuf>,
+    /// Device of the PyTorch reference: `cpu`, or `cuda` on a GPU machine.
+    #[arg(long, default_value = "cpu")]
+    pub torch_device: String,
+    /// Backend that trains the accuracy points.
+    #[arg(long, default_value = "flex")]
+    pub accuracy_device: BackendKind,
     /// Also train every preset to completion on flex and record PSNR against wall time.
     #[arg(long)]
     pub accuracy: bool,
@@ -101,6 +107,7 @@ fn torch_reference(
     python: &std::path::Path,
     cfg: &NerfConfig,
     steps: usize,
+    device: &str,
 ) -> anyhow::Result<serde_json::Value> {
     let FieldConfig::Hash {
         grid,
@@ -126,6 +133,8 @@ fn torch_reference(
         .arg(tmp.path())
         .arg("--steps")
         .arg(steps.to_string())
+        .arg("--device")
+        .arg(device)
         .output()
         .with_context(|| format!("running {}", python.display()))?;
     if !out.status.success() {
@@ -182,15 +191,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "samples_per_ray": cfg.sampler.samples_per_ray,
             }));
         }
-        let torch = torch_reference(&python, &cfg, args.steps)
+        let torch = torch_reference(&python, &cfg, args.steps, &args.torch_device)
             .unwrap_or_else(|e| json!({ "unavailable": e.to_string() }));
+        let ratio_key = format!("ratio_vs_torch_{}", args.torch_device);
         if let Some(ts) = torch["steps_per_s"].as_f64() {
             for r in rows.iter_mut().filter(|r| r["preset"] == preset) {
                 let s = r["steps_per_s"].as_f64().unwrap_or(0.0);
-                r["ratio_vs_torch_cpu"] = json!(s / ts);
+                r[&ratio_key] = json!(s / ts);
             }
         }
-        rows.push(json!({ "preset": preset, "device": "pytorch-cpu", "reference": torch }));
+        rows.push(
+            json!({ "preset": preset, "device": format!("pytorch-{}", args.torch_device),
+            "reference": torch }),
+        );
     }
     let stamp = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)?
@@ -207,7 +220,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let name = spec.split('=').next().unwrap_or(spec).trim();
             for preset in args.accuracy_presets.split(',') {
                 let cfg = NerfConfig::preset(preset.trim())?;
-                let mut t = Trainer::new(&acc_scene, cfg, BackendKind::Flex)?;
+                let mut t = Trainer::new(&acc_scene, cfg, args.accuracy_device)?;
                 let s = t.fit(None, true)?;
                 let mean = test_psnr(&t, &acc_scene)?;
                 tracing::info!(
@@ -218,7 +231,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     "nerf accuracy"
                 );
                 if let Some(a) = report["accuracy"].as_array_mut() {
-                    a.push(json!({ "preset": preset, "scene": name, "device": "flex",
+                    a.push(json!({ "preset": preset, "scene": name,
+                        "device": args.accuracy_device.name(),
                         "steps": t.config.train.steps, "train_seconds": s.seconds,
                         "test_views": acc_scene.split(Split::Test).count(),
                         "psnr_test_unmasked": mean }));

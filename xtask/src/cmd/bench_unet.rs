@@ -43,6 +43,9 @@ pub struct Args {
     /// Threads for torch (default: all logical cores).
     #[arg(long)]
     threads: Option<usize>,
+    /// Device of the diffusers reference: `cpu`, or `cuda` on a GPU machine.
+    #[arg(long, default_value = "cpu")]
+    python_device: String,
     /// Output folder.
     #[arg(long, default_value = "bench/results")]
     out: PathBuf,
@@ -215,6 +218,7 @@ fn run_python(args: &Args) -> Value {
             "--repeats",
             &args.repeats.to_string(),
         ])
+        .args(["--device", &args.python_device])
         .arg("--vae-sizes")
         .args(args.vae_sizes.iter().map(|s| s.to_string()));
     match cmd.output() {

@@ -4,6 +4,7 @@ pub mod ablate;
 pub mod bench;
 pub mod bench_eval;
 pub mod bench_nerf;
+pub mod bench_pipeline;
 pub mod bench_quality;
 pub mod bench_unet;
 pub mod devices;

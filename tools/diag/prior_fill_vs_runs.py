@@ -1,0 +1,115 @@
+"""Is the prior's own 2D fill better than what the NeRF already knows? (issue 8 diagnosis)
+
+For every test view of a procedural scene (object-free ground truth, `test_label/` masks),
+crops the mask's box grown by 25% per side (the guidance crop), resizes it to the prior's
+resolution, inpaints it with `cargo xtask inpaint-image` (the known region blended in, K
+seeds, their mean), and scores masked PSNR against the ground truth for:
+  - the prior: one sample and the mean of K;
+  - each run folder's test render (e.g. `none`, `gb-nerf`), cropped the same way;
+  - a mean-colour fill.
+If the prior's fill scores below the `none` run, distilling it can only pull the NeRF away
+from what the other views already show.
+
+Usage (from the repository root, after `cargo build --workspace`):
+  python tools/diag/prior_fill_vs_runs.py --scene SCENE_DIR --runs ABLATE_DIR \
+      --methods none,gb-nerf --prompt "..." --negative-prompt "..." --out RESULT.json
+Pinned: numpy, Pillow (tools/requirements.txt); no torch.
+"""
+
+import argparse
+import json
+import os
+import subprocess
+
+import numpy as np
+from PIL import Image
+
+
+def load(path):
+    return np.asarray(Image.open(path).convert("RGB"), dtype=np.float32) / 255
+
+
+def resize(a, res, resample):
+    img = Image.fromarray((np.clip(a, 0, 1) * 255).round().astype(np.uint8))
+    return np.asarray(img.resize((res, res), resample), dtype=np.float32) / 255
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scene", required=True)
+    ap.add_argument("--runs", required=True, help="folder with one sub-folder per run")
+    ap.add_argument("--methods", default="none,gb-nerf")
+    ap.add_argument("--prompt", required=True)
+    ap.add_argument("--negative-prompt", default="")
+    ap.add_argument("--prior", default="tiny")
+    ap.add_argument("--resolution", type=int, default=64)
+    ap.add_argument("--samples", type=int, default=4)
+    ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--xtask", default="target-lead/debug/xtask")
+    ap.add_argument("--work", default="/tmp/prior-fill")
+    ap.add_argument("--out", required=True)
+    a = ap.parse_args()
+    os.makedirs(a.work, exist_ok=True)
+    images = os.path.join(a.scene, "images_1")
+    names = sorted(os.path.splitext(f)[0] for f in os.listdir(os.path.join(images, "test_label")))
+    methods = [m for m in a.methods.split(",") if m]
+    rows = {}
+    for name in names:
+        gt = load(os.path.join(images, name + ".png"))
+        mask = np.asarray(Image.open(os.path.join(images, "test_label", name + ".png")).convert("L")) > 127
+        ys, xs = np.nonzero(mask)
+        if len(ys) == 0:
+            continue
+        x0, x1, y0, y1 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1
+        side = max(x1 - x0, y1 - y0)
+        half = side // 2 + int(0.25 * side)
+        cx, cy = (x0 + x1) // 2, (y0 + y1) // 2
+        bx0, by0 = max(cx - half, 0), max(cy - half, 0)
+        bx1, by1 = min(cx + half, gt.shape[1]), min(cy + half, gt.shape[0])
+
+        def crop(img):
+            return resize(img[by0:by1, bx0:bx1], a.resolution, Image.BILINEAR)
+
+        gtc = crop(gt)
+        mc = resize(mask[by0:by1, bx0:bx1, None].repeat(3, 2).astype(np.float32), a.resolution, Image.NEAREST)[..., 0] > 0.5
+        gt_path = os.path.join(a.work, name + "_gt.png")
+        mask_path = os.path.join(a.work, name + "_mask.png")
+        Image.fromarray((gtc * 255).round().astype(np.uint8)).save(gt_path)
+        Image.fromarray((mc * 255).astype(np.uint8)).save(mask_path)
+
+        def psnr(x):
+            return float(-10 * np.log10(np.mean((x[mc] - gtc[mc]) ** 2)))
+
+        samples = []
+        for seed in range(a.samples):
+            out = os.path.join(a.work, f"{name}_s{seed}.png")
+            subprocess.run([a.xtask, "inpaint-image", "--prior", a.prior, "--image", gt_path,
+                            "--mask", mask_path, "--prompt", a.prompt,
+                            "--negative-prompt", a.negative_prompt, "--steps", str(a.steps),
+                            "--seed", str(seed), "--blend-known", "--out", out],
+                           check=True, capture_output=True)
+            samples.append(load(out))
+        fill = gtc.copy()
+        fill[mc] = gtc[~mc].mean(0)
+        row = {"prior_one_sample": psnr(samples[0]),
+               f"prior_mean_of_{a.samples}": psnr(np.mean(samples, 0)),
+               "mean_colour_fill": psnr(fill), "mask_fraction": float(mc.mean())}
+        for m in methods:
+            row[m] = psnr(crop(load(os.path.join(a.runs, m, "renders", name + "_rgb.png"))))
+        rows[name] = row
+        print(name, {k: round(v, 2) for k, v in row.items()}, flush=True)
+    keys = list(next(iter(rows.values())).keys())
+    mean = {k: float(np.mean([r[k] for r in rows.values()])) for k in keys}
+    print("mean", {k: round(v, 2) for k, v in mean.items()})
+    doc = {"diagnosis": "masked PSNR (dB) in the guidance crop of each test view",
+           "scene": a.scene, "prior": a.prior, "resolution": a.resolution,
+           "ddim_steps": a.steps, "samples": a.samples, "blend_known": True,
+           "prompt": a.prompt, "negative_prompt": a.negative_prompt,
+           "mean": mean, "per_view": rows}
+    with open(a.out + ".tmp", "w") as f:
+        json.dump(doc, f, indent=2)
+    os.replace(a.out + ".tmp", a.out)
+
+
+if __name__ == "__main__":
+    main()
