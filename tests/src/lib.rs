@@ -37,3 +37,70 @@ pub fn xtask(args: &[&str]) -> Output {
         .output()
         .expect("cannot start the xtask binary")
 }
+
+/// The committed tiny SD-inpainting fixture (resolution 32), the prior of the end-to-end runs.
+pub const FIXTURE_PRIOR: &str = "crates/gb-diffusion/tests/fixtures/sd_image/pipeline";
+
+/// The fixture U-Net LoRA that fits [`FIXTURE_PRIOR`].
+pub const FIXTURE_LORA: &str =
+    "crates/gb-diffusion/tests/fixtures/sd_text/lora/unet_lora.safetensors";
+
+/// A path as `&str` (test paths are UTF-8).
+pub fn path_str(p: &std::path::Path) -> &str {
+    p.to_str().expect("non-UTF-8 test path")
+}
+
+/// Fails with the command's stderr when `out` is not a success.
+pub fn assert_success(out: &Output, what: &str) {
+    assert!(
+        out.status.success(),
+        "{what} failed ({:?}):\n{}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Generates a small procedural `stairs` scene (5 views, 1 test view, seed 3) of
+/// `width x height` with the mask grown by `dilate` pixels at `dir/scene`.
+pub fn small_stairs(dir: &std::path::Path, width: usize, height: usize, dilate: usize) -> PathBuf {
+    let scene = dir.join("scene");
+    let (w, h, d) = (width.to_string(), height.to_string(), dilate.to_string());
+    let out = xtask(&[
+        "scene",
+        "--name",
+        "stairs",
+        "--width",
+        &w,
+        "--height",
+        &h,
+        "--views",
+        "5",
+        "--test-views",
+        "1",
+        "--dilate",
+        &d,
+        "--seed",
+        "3",
+        "--out",
+        path_str(&scene),
+    ]);
+    assert_success(&out, "scene");
+    scene
+}
+
+/// Writes `dir/small.toml`: the `fast` preset with 128 rays of 16 samples per step, and a
+/// checkpoint every `checkpoint_every` steps when given.
+pub fn small_preset(dir: &std::path::Path, checkpoint_every: Option<usize>) -> PathBuf {
+    let mut fast = std::fs::read_to_string(workspace_root().join("configs/presets/fast.toml"))
+        .expect("configs/presets/fast.toml")
+        .replace("rays_per_batch = 512", "rays_per_batch = 128")
+        .replace("samples_per_ray = 40", "samples_per_ray = 16");
+    assert!(fast.contains("rays_per_batch = 128") && fast.contains("samples_per_ray = 16"));
+    if let Some(k) = checkpoint_every {
+        fast = fast.replace("checkpoint_every = 200", &format!("checkpoint_every = {k}"));
+        assert!(fast.contains(&format!("checkpoint_every = {k}")));
+    }
+    let preset = dir.join("small.toml");
+    std::fs::write(&preset, fast).expect("writing small.toml");
+    preset
+}

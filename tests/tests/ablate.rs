@@ -6,14 +6,10 @@
 
 use std::path::Path;
 
-use gb_tests::{workspace_root, xtask};
+use gb_tests::xtask;
 
-const PRIOR: &str = "crates/gb-diffusion/tests/fixtures/sd_image/pipeline";
-const LORA: &str = "crates/gb-diffusion/tests/fixtures/sd_text/lora/unet_lora.safetensors";
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use gb_tests::{path_str as s, small_preset, small_stairs};
+use gb_tests::{FIXTURE_LORA as LORA, FIXTURE_PRIOR as PRIOR};
 
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
@@ -22,31 +18,8 @@ fn json(path: &Path) -> serde_json::Value {
 #[test]
 fn ablate_runs_the_grid_and_writes_the_tables() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("scene");
-    let o = xtask(&[
-        "scene",
-        "--name",
-        "stairs",
-        "--width",
-        "128",
-        "--height",
-        "96",
-        "--views",
-        "5",
-        "--test-views",
-        "1",
-        "--seed",
-        "3",
-        "--out",
-        s(&scene),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let fast = std::fs::read_to_string(workspace_root().join("configs/presets/fast.toml"))
-        .unwrap()
-        .replace("rays_per_batch = 512", "rays_per_batch = 128")
-        .replace("samples_per_ray = 40", "samples_per_ray = 16");
-    let preset = dir.path().join("small.toml");
-    std::fs::write(&preset, fast).unwrap();
+    let scene = small_stairs(dir.path(), 128, 96, 0);
+    let preset = small_preset(dir.path(), None);
     let out = dir.path().join("ablate");
     let o = xtask(&[
         "ablate",

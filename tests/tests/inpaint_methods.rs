@@ -11,54 +11,13 @@ use std::process::Output;
 
 use gb_tests::{workspace_root, xtask};
 
-const PRIOR: &str = "crates/gb-diffusion/tests/fixtures/sd_image/pipeline";
-const LORA: &str = "crates/gb-diffusion/tests/fixtures/sd_text/lora/unet_lora.safetensors";
+use gb_tests::{assert_success as check, path_str as s, small_preset, small_stairs};
+use gb_tests::{FIXTURE_LORA as LORA, FIXTURE_PRIOR as PRIOR};
 
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn check(out: &Output, what: &str) {
-    assert!(
-        out.status.success(),
-        "{what} failed ({:?}):\n{}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-/// A tiny stairs scene and a small preset (fast with fewer rays and samples) in `dir`.
+/// A tiny stairs scene (40x30, mask grown by 1 pixel) and a small preset (fast with fewer
+/// rays and samples, a checkpoint every step) in `dir`.
 fn setup(dir: &Path) -> (PathBuf, PathBuf) {
-    let scene = dir.join("scene");
-    let out = xtask(&[
-        "scene",
-        "--name",
-        "stairs",
-        "--width",
-        "40",
-        "--height",
-        "30",
-        "--views",
-        "5",
-        "--test-views",
-        "1",
-        "--dilate",
-        "1",
-        "--seed",
-        "3",
-        "--out",
-        s(&scene),
-    ]);
-    check(&out, "scene");
-    let fast = std::fs::read_to_string(workspace_root().join("configs/presets/fast.toml"))
-        .unwrap()
-        .replace("rays_per_batch = 512", "rays_per_batch = 128")
-        .replace("samples_per_ray = 40", "samples_per_ray = 16")
-        .replace("checkpoint_every = 200", "checkpoint_every = 1");
-    assert!(fast.contains("rays_per_batch = 128") && fast.contains("checkpoint_every = 1"));
-    let preset = dir.join("small.toml");
-    std::fs::write(&preset, fast).unwrap();
-    (scene, preset)
+    (small_stairs(dir, 40, 30, 1), small_preset(dir, Some(1)))
 }
 
 fn inpaint(scene: &Path, preset: &Path, out: &Path, extra: &[&str]) -> Output {

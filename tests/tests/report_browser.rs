@@ -13,20 +13,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use gb_tests::{workspace_root, xtask};
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn check(out: &Output, what: &str) {
-    assert!(
-        out.status.success(),
-        "{what} failed ({:?}):\n{}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
+use gb_tests::{assert_success as check, path_str as s, small_preset, small_stairs, xtask};
 
 /// The chromium binary, or a failure that says how to install it.
 fn chromium() -> PathBuf {
@@ -131,38 +118,9 @@ fn assert_decodes(dir: &Path, src: &str) {
     }
 }
 
+/// A tiny stairs scene (40x30, mask grown by 1 pixel) and a small preset in `dir`.
 fn setup(dir: &Path) -> (PathBuf, PathBuf) {
-    let scene = dir.join("scene");
-    check(
-        &xtask(&[
-            "scene",
-            "--name",
-            "stairs",
-            "--width",
-            "40",
-            "--height",
-            "30",
-            "--views",
-            "5",
-            "--test-views",
-            "1",
-            "--dilate",
-            "1",
-            "--seed",
-            "3",
-            "--out",
-            s(&scene),
-        ]),
-        "scene",
-    );
-    let fast = std::fs::read_to_string(workspace_root().join("configs/presets/fast.toml"))
-        .unwrap()
-        .replace("rays_per_batch = 512", "rays_per_batch = 128")
-        .replace("samples_per_ray = 40", "samples_per_ray = 16");
-    assert!(fast.contains("rays_per_batch = 128"));
-    let preset = dir.join("small.toml");
-    std::fs::write(&preset, fast).unwrap();
-    (scene, preset)
+    (small_stairs(dir, 40, 30, 1), small_preset(dir, None))
 }
 
 fn inpaint(scene: &Path, preset: &Path, out: &Path, extra: &[&str]) {

@@ -249,6 +249,18 @@ fn every_bad_input_is_one_clear_line_with_exit_code_2() {
     let d = case("bad_png");
     std::fs::write(d.join("images_1/view_002.png"), b"\x89PNG garbage").unwrap();
     assert_clear_error(&d, &["view_002.png", "cannot read image"]);
+    // the decoder's message is printed once, not again as the error's cause
+    let err = stderr(&xtask(&["scene-info", "--scene", d.to_str().unwrap()]));
+    let reason = err
+        .split("cannot read image: ")
+        .nth(1)
+        .unwrap_or("")
+        .trim()
+        .to_string();
+    assert!(!reason.is_empty(), "{err}");
+    let parts: Vec<&str> = reason.split(": ").collect();
+    let unique: std::collections::HashSet<&str> = parts.iter().copied().collect();
+    assert_eq!(unique.len(), parts.len(), "a cause is repeated: {err}");
 
     let d = case("orphan_mask");
     std::fs::copy(

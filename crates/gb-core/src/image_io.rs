@@ -43,13 +43,14 @@ impl RgbImage {
 /// An image file could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum ImageIoError {
-    /// The file could not be opened or decoded.
-    #[error("{path}: cannot read image: {source}")]
+    /// The file could not be opened or decoded. The decoder's error is part of the message
+    /// and is deliberately not a `source`, so that error chains (anyhow) print it once.
+    #[error("{path}: cannot read image: {error}")]
     Read {
         /// The file.
         path: PathBuf,
         /// The decoder's error.
-        source: image::ImageError,
+        error: image::ImageError,
     },
     /// The file could not be encoded or written.
     #[error("{path}: cannot write image: {reason}")]
@@ -64,9 +65,9 @@ pub enum ImageIoError {
 /// Reads a PNG/JPEG as RGB in [0, 1]. Alpha, if present, is composited on `background`
 /// (pass `None` to drop alpha).
 pub fn read_rgb(path: &Path, background: Option<[f32; 3]>) -> Result<RgbImage, ImageIoError> {
-    let img = image::open(path).map_err(|source| ImageIoError::Read {
+    let img = image::open(path).map_err(|error| ImageIoError::Read {
         path: path.to_path_buf(),
-        source,
+        error,
     })?;
     let rgba = img.to_rgba32f();
     let (w, h) = (rgba.width() as usize, rgba.height() as usize);
@@ -92,9 +93,9 @@ pub fn read_rgb(path: &Path, background: Option<[f32; 3]>) -> Result<RgbImage, I
 /// Reads a single-channel image (e.g. a mask); returns `(width, height, values)` with
 /// 8-bit values divided by 255 and 16-bit values by 65535.
 pub fn read_gray(path: &Path) -> Result<(usize, usize, Vec<f32>), ImageIoError> {
-    let img = image::open(path).map_err(|source| ImageIoError::Read {
+    let img = image::open(path).map_err(|error| ImageIoError::Read {
         path: path.to_path_buf(),
-        source,
+        error,
     })?;
     let g = img.to_luma32f();
     Ok((g.width() as usize, g.height() as usize, g.into_raw()))

@@ -295,10 +295,10 @@ fn check_same_size(a: &Path, b: &Path) -> Result<(), InputError> {
     let dims = |p: &Path| {
         image::image_dimensions(p)
             .map(|(w, h)| (w as usize, h as usize))
-            .map_err(|source| {
+            .map_err(|error| {
                 InputError::Image(ImageIoError::Read {
                     path: p.to_path_buf(),
-                    source,
+                    error,
                 })
             })
     };

@@ -404,8 +404,8 @@ impl PairSource for DiodeDataset {
         let img = gb_core::read_rgb(&e.rgb, None).map_err(|err| FinetuneError::Invalid {
             path: e.rgb.clone(),
             message: match err {
-                gb_core::ImageIoError::Read { source, .. } => {
-                    format!("cannot read image: {source}")
+                gb_core::ImageIoError::Read { error, .. } => {
+                    format!("cannot read image: {error}")
                 }
                 other => other.to_string(),
             },

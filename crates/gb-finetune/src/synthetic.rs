@@ -65,7 +65,7 @@ fn read_image(path: &Path) -> Result<gb_core::RgbImage, FinetuneError> {
     gb_core::read_rgb(path, None).map_err(|err| FinetuneError::Invalid {
         path: path.to_path_buf(),
         message: match err {
-            gb_core::ImageIoError::Read { source, .. } => format!("cannot read image: {source}"),
+            gb_core::ImageIoError::Read { error, .. } => format!("cannot read image: {error}"),
             other => other.to_string(),
         },
     })

@@ -144,7 +144,9 @@ impl NerfField {
     fn trunk(&self, points: &[[f32; 3]]) -> Tensor<2> {
         let device = self.device();
         let enc = match &self.grid {
-            Some(grid) => grid.encode(points),
+            // host lookups on CPU backends (faster there), device lookups on GPUs
+            Some(grid) if gb_core::is_host_device(&device) => grid.encode(points),
+            Some(grid) => grid.encode_points(points_tensor(points, &device)),
             None => {
                 let freqs = match &self.config {
                     FieldConfig::Vanilla { pos_freqs, .. } => *pos_freqs,
