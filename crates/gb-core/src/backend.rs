@@ -20,15 +20,6 @@ pub enum BackendKind {
     Wgpu,
 }
 
-/// True when `device` (or the device an autodiff device wraps) computes on the host CPU
-/// (flex, ndarray), where a plain loop beats many small tensor operations; false for wgpu.
-#[allow(deprecated)]
-pub fn is_host_device(device: &Device) -> bool {
-    // one device each: equality with the default one names the backend
-    let plain = device.clone().inner();
-    plain == Device::flex() || plain == Device::ndarray()
-}
-
 impl BackendKind {
     /// Every backend, in the order the tests visit them.
     pub const ALL: [BackendKind; 3] = [BackendKind::Ndarray, BackendKind::Flex, BackendKind::Wgpu];
@@ -127,19 +118,6 @@ mod tests {
         assert_eq!("wgpu".parse::<BackendKind>().unwrap(), BackendKind::Wgpu);
         let err = "cuda".parse::<BackendKind>().unwrap_err();
         assert!(err.to_string().contains("cuda"));
-    }
-
-    #[test]
-    fn host_devices_are_the_cpu_backends_with_or_without_autodiff() {
-        for kind in BackendKind::ALL {
-            let host = kind != BackendKind::Wgpu;
-            assert_eq!(is_host_device(&kind.device()), host, "{kind}");
-            assert_eq!(
-                is_host_device(&kind.autodiff_device()),
-                host,
-                "{kind} autodiff"
-            );
-        }
     }
 
     #[test]

@@ -10,6 +10,6 @@ pub mod testdata;
 
 pub use assets::{assets_dir, tiny_prior_dir};
 pub use atomic::write_atomic;
-pub use backend::{heavy_test_backends, is_host_device, test_backends, BackendKind};
+pub use backend::{heavy_test_backends, test_backends, BackendKind};
 pub use image_io::{read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage};
 pub use testdata::test_data_dir;

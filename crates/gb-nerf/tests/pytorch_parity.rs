@@ -136,6 +136,7 @@ fn hash_encoding_matches_pytorch() {
         log2_table_size: h["log2_table_size"].as_u64().unwrap() as u32,
         base_resolution: h["base_resolution"].as_f64().unwrap() as f32,
         max_resolution: h["max_resolution"].as_f64().unwrap() as f32,
+        lookups: Default::default(),
     };
     let pts: Vec<[f32; 3]> = floats(&h["points"])
         .chunks(3)

@@ -13,12 +13,17 @@
 //! - the output is the level features concatenated: `levels * features` values per point.
 //!
 //! Unlike instant-ngp every level owns a full table of `T` rows (simpler addressing, same
-//! values). On a GPU backend the field computes the lookups (indices and weights) on the
-//! device from the uploaded points ([`HashGrid::encode_points`]): 12 bytes per point cross
-//! the bus instead of `levels * 8` rows and weights (1.5 KB per point with 16 levels), which
-//! kept the GPU waiting on the host. On the CPU backends the host loop ([`hash_lookups`],
-//! [`HashGrid::encode`]) stays: there it is faster than the tensor version (flex, 2 cores:
-//! 7.5 against 6.1 steps/s on `fast`, 0.55 against 0.41 on `balanced`). The hash is evaluated in the device's integer type: wrapping `i32`
+//! values). The lookups (indices and weights) are computed where [`LookupSite`] says:
+//! - `host` (the default): a loop on the CPU ([`hash_lookups`], [`HashGrid::encode`]), then
+//!   an upload of `levels * 8` rows and weights per point (1.5 KB with 16 levels);
+//! - `device`: tensor operations on the compute device from the uploaded points, 12 bytes
+//!   per point ([`HashGrid::encode_points`]), bit-identical to the host loop.
+//!
+//! Measured on 2 CPU cores, the host loop wins on every backend there: flex 7.5 against 6.1
+//! steps/s (`fast`) and 0.55 against 0.41 (`balanced`); wgpu on lavapipe 1.60 against 0.65
+//! and 0.144 against 0.070. `device` is meant for discrete GPUs, where an H100 trained the
+//! `fast` preset at 2.8 steps/s with host lookups, slower than flex on the same machine's
+//! 16 cores; it has not been timed on a GPU yet. The hash is evaluated in the device's integer type: wrapping `i32`
 //! (wgpu) or exact `i64` (CPU backends) give the same low bits, and the row keeps only the
 //! low `log2_table_size` bits. [`hash_lookups`] is the CPU definition the device path is
 //! tested against.
@@ -40,6 +45,23 @@ pub struct HashGridConfig {
     pub base_resolution: f32,
     /// Finest grid resolution (reference: 2048 times the scene bound; 512 for a unit box).
     pub max_resolution: f32,
+    /// Where the rows and weights are computed (TOML `lookups = "host"` or `"device"`).
+    #[serde(default)]
+    pub lookups: LookupSite,
+}
+
+/// Where a hash grid computes its lookups (rows and trilinear weights); both give the same
+/// encoding bit for bit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LookupSite {
+    /// A loop on the host, then an upload of `levels * 8` rows and weights per point (the
+    /// default: fastest on the CPU backends, and on lavapipe).
+    #[default]
+    Host,
+    /// Tensor operations on the compute device from the uploaded points (12 bytes per
+    /// point): meant for discrete GPUs, where the host loop and the upload dominate.
+    Device,
 }
 
 impl HashGridConfig {
@@ -268,6 +290,7 @@ mod tests {
             log2_table_size: 10,
             base_resolution: 4.0,
             max_resolution: 64.0,
+            lookups: LookupSite::Host,
         }
     }
 
@@ -318,6 +341,7 @@ mod tests {
             log2_table_size: 12,
             base_resolution: 4.0,
             max_resolution: 700.0,
+            lookups: LookupSite::Device,
         };
         let mut pts: Vec<[f32; 3]> = (0..300)
             .map(|i| {
@@ -352,6 +376,17 @@ mod tests {
                 .fold(0.0f32, f32::max);
             assert!(worst <= 1e-9, "{kind}: max difference {worst}");
         }
+    }
+
+    #[test]
+    fn the_lookup_site_is_read_from_toml_and_defaults_to_host() {
+        let base = "levels = 2\nfeatures_per_level = 2\nlog2_table_size = 8\n\
+                    base_resolution = 4.0\nmax_resolution = 16.0\n";
+        let c: HashGridConfig = toml::from_str(base).unwrap();
+        assert_eq!(c.lookups, LookupSite::Host);
+        let c: HashGridConfig = toml::from_str(&format!("{base}lookups = \"device\"\n")).unwrap();
+        assert_eq!(c.lookups, LookupSite::Device);
+        assert!(toml::from_str::<HashGridConfig>(&format!("{base}lookups = \"gpu\"\n")).is_err());
     }
 
     #[test]

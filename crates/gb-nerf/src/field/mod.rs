@@ -14,7 +14,7 @@ use burn::tensor::activation::sigmoid;
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
-pub use hash_grid::{hash_lookups, HashGrid, HashGridConfig, HashLookups};
+pub use hash_grid::{hash_lookups, HashGrid, HashGridConfig, HashLookups, LookupSite};
 pub use mlp::Mlp;
 pub use positional::{positional_dim, positional_encoding};
 
@@ -144,9 +144,10 @@ impl NerfField {
     fn trunk(&self, points: &[[f32; 3]]) -> Tensor<2> {
         let device = self.device();
         let enc = match &self.grid {
-            // host lookups on CPU backends (faster there), device lookups on GPUs
-            Some(grid) if gb_core::is_host_device(&device) => grid.encode(points),
-            Some(grid) => grid.encode_points(points_tensor(points, &device)),
+            Some(grid) => match grid.config.lookups {
+                LookupSite::Host => grid.encode(points),
+                LookupSite::Device => grid.encode_points(points_tensor(points, &device)),
+            },
             None => {
                 let freqs = match &self.config {
                     FieldConfig::Vanilla { pos_freqs, .. } => *pos_freqs,
@@ -209,6 +210,7 @@ mod tests {
                     log2_table_size: 10,
                     base_resolution: 4.0,
                     max_resolution: 32.0,
+                    lookups: Default::default(),
                 },
                 hidden: 16,
                 geo_features: 7,

@@ -157,6 +157,7 @@ mod tests {
                 log2_table_size: 10,
                 base_resolution: 4.0,
                 max_resolution: 32.0,
+                lookups: Default::default(),
             },
             hidden: 16,
             geo_features: 7,
