@@ -28,37 +28,37 @@ def cameras(scene):
     return rot, poses[:, :, 3], poses[:, :, 4]
 
 
-def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--scene", required=True)
-    ap.add_argument("--out")
-    a = ap.parse_args()
-    images = os.path.join(a.scene, "images_1")
-    names = sorted(os.path.splitext(f)[0] for f in os.listdir(images) if f.endswith(".png"))
-    tests = set(os.path.splitext(f)[0] for f in os.listdir(os.path.join(images, "test_label")))
-    rot, trans, hwf = cameras(a.scene)
-    depth = {n: np.load(os.path.join(a.scene, "depth_1", n + ".npy")) for n in names}
-    h, w = depth[names[0]].shape
-    f = hwf[0, 2]
-    cx, cy = w / 2, h / 2
-    train = [i for i, n in enumerate(names) if n not in tests]
-    masks = {i: np.asarray(Image.open(os.path.join(images, "label", names[i] + ".png")).convert("L")) > 127
-             for i in train}
-    rows = {}
-    for i, n in enumerate(names):
-        if n not in tests:
-            continue
-        m = np.asarray(Image.open(os.path.join(images, "test_label", n + ".png")).convert("L")) > 127
-        ys, xs = np.nonzero(m & (depth[n] > 0))
-        if len(ys) == 0:
-            continue
-        d = depth[n][ys, xs]
+class Scene:
+    """Cameras, ground-truth depths and masks of a procedural scene."""
+
+    def __init__(self, scene):
+        self.images = os.path.join(scene, "images_1")
+        self.names = sorted(os.path.splitext(f)[0] for f in os.listdir(self.images) if f.endswith(".png"))
+        self.tests = set(os.path.splitext(f)[0] for f in os.listdir(os.path.join(self.images, "test_label")))
+        self.rot, self.trans, hwf = cameras(scene)
+        self.depth = {n: np.load(os.path.join(scene, "depth_1", n + ".npy")) for n in self.names}
+        self.h, self.w = self.depth[self.names[0]].shape
+        self.f = hwf[0, 2]
+        self.train = [i for i, n in enumerate(self.names) if n not in self.tests]
+        self.masks = {i: self.mask("label", self.names[i]) for i in self.train}
+
+    def mask(self, folder, name):
+        return np.asarray(Image.open(os.path.join(self.images, folder, name + ".png")).convert("L")) > 127
+
+    def observed(self, name, region):
+        """Per pixel of test view `name` inside `region` (bool [h, w]): how many training
+        views observe its surface point; 0 outside the region."""
+        i = self.names.index(name)
+        h, w, f = self.h, self.w, self.f
+        cx, cy = w / 2, h / 2
+        count = np.zeros((h, w), int)
+        ys, xs = np.nonzero(region & (self.depth[name] > 0))
+        d = self.depth[name][ys, xs]
         pc = np.stack([(xs + 0.5 - cx) / f * d, -(ys + 0.5 - cy) / f * d, -d], 1)
-        world = pc @ rot[i].T + trans[i]
-        seen = np.zeros(len(d), bool)
+        world = pc @ self.rot[i].T + self.trans[i]
         views = np.zeros(len(d), int)
-        for j in train:
-            pu = (world - trans[j]) @ rot[j]
+        for j in self.train:
+            pu = (world - self.trans[j]) @ self.rot[j]
             z = -pu[:, 2]
             ok = z > 1e-6
             u = np.where(ok, f * pu[:, 0] / np.maximum(z, 1e-6) + cx, -1)
@@ -66,12 +66,30 @@ def main():
             ui, vi = np.floor(u).astype(int), np.floor(v).astype(int)
             inside = ok & (ui >= 0) & (ui < w) & (vi >= 0) & (vi < h)
             uc, vc = np.clip(ui, 0, w - 1), np.clip(vi, 0, h - 1)
-            visible = inside & ~masks[j][vc, uc] & (np.abs(depth[names[j]][vc, uc] - z) <= 0.02 * z)
-            seen |= visible
-            views += visible
-        rows[n] = {"mask_pixels": int(len(d)), "observed_fraction": float(seen.mean()),
+            dj = self.depth[self.names[j]][vc, uc]
+            views += inside & ~self.masks[j][vc, uc] & (np.abs(dj - z) <= 0.02 * z)
+        count[ys, xs] = views
+        return count
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scene", required=True)
+    ap.add_argument("--out")
+    a = ap.parse_args()
+    sc = Scene(a.scene)
+    rows = {}
+    for n in sc.names:
+        if n not in sc.tests:
+            continue
+        m = sc.mask("test_label", n) & (sc.depth[n] > 0)
+        if not m.any():
+            continue
+        views = sc.observed(n, m)[m]
+        rows[n] = {"mask_pixels": int(m.sum()), "observed_fraction": float((views > 0).mean()),
                    "mean_views_observing": float(views.mean())}
         print(n, rows[n])
+    train = sc.train
     mean = float(np.mean([r["observed_fraction"] for r in rows.values()]))
     print("mean observed fraction", round(mean, 3))
     if a.out:

@@ -8,7 +8,9 @@ seeds, their mean), and scores masked PSNR against the ground truth for:
   - each run folder's test render (e.g. `none`, `gb-nerf`), cropped the same way;
   - a mean-colour fill.
 If the prior's fill scores below the `none` run, distilling it can only pull the NeRF away
-from what the other views already show.
+from what the other views already show. Each score is also split into the mask pixels that
+some training view observes and those none does (`hidden_region_visibility.py`), suffixes
+`_observed` and `_unobserved`.
 
 Usage (from the repository root, after `cargo build --workspace`):
   python tools/diag/prior_fill_vs_runs.py --scene SCENE_DIR --runs ABLATE_DIR \
@@ -20,9 +22,13 @@ import argparse
 import json
 import os
 import subprocess
+import sys
 
 import numpy as np
 from PIL import Image
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from hidden_region_visibility import Scene  # noqa: E402
 
 
 def load(path):
@@ -48,7 +54,9 @@ def main():
     ap.add_argument("--xtask", default="target-lead/debug/xtask")
     ap.add_argument("--work", default="/tmp/prior-fill")
     ap.add_argument("--out", required=True)
+    ap.add_argument("--reuse", action="store_true", help="keep samples already in --work")
     a = ap.parse_args()
+    sc = Scene(a.scene)
     os.makedirs(a.work, exist_ok=True)
     images = os.path.join(a.scene, "images_1")
     names = sorted(os.path.splitext(f)[0] for f in os.listdir(os.path.join(images, "test_label")))
@@ -71,18 +79,32 @@ def main():
             return resize(img[by0:by1, bx0:bx1], a.resolution, Image.BILINEAR)
 
         gtc = crop(gt)
-        mc = resize(mask[by0:by1, bx0:bx1, None].repeat(3, 2).astype(np.float32), a.resolution, Image.NEAREST)[..., 0] > 0.5
+
+        def crop_mask(m):
+            m3 = m[by0:by1, bx0:bx1, None].repeat(3, 2).astype(np.float32)
+            return resize(m3, a.resolution, Image.NEAREST)[..., 0] > 0.5
+
+        mc = crop_mask(mask)
+        seen = crop_mask(mask & (sc.observed(name, mask) > 0)) & mc
+        regions = {"": mc, "_observed": seen, "_unobserved": mc & ~seen}
         gt_path = os.path.join(a.work, name + "_gt.png")
         mask_path = os.path.join(a.work, name + "_mask.png")
         Image.fromarray((gtc * 255).round().astype(np.uint8)).save(gt_path)
         Image.fromarray((mc * 255).astype(np.uint8)).save(mask_path)
 
-        def psnr(x):
-            return float(-10 * np.log10(np.mean((x[mc] - gtc[mc]) ** 2)))
+        def scores(key, x):
+            out = {}
+            for suffix, m in regions.items():
+                if m.any():
+                    out[key + suffix] = float(-10 * np.log10(np.mean((x[m] - gtc[m]) ** 2)))
+            return out
 
         samples = []
         for seed in range(a.samples):
             out = os.path.join(a.work, f"{name}_s{seed}.png")
+            if a.reuse and os.path.exists(out):
+                samples.append(load(out))
+                continue
             subprocess.run([a.xtask, "inpaint-image", "--prior", a.prior, "--image", gt_path,
                             "--mask", mask_path, "--prompt", a.prompt,
                             "--negative-prompt", a.negative_prompt, "--steps", str(a.steps),
@@ -91,15 +113,16 @@ def main():
             samples.append(load(out))
         fill = gtc.copy()
         fill[mc] = gtc[~mc].mean(0)
-        row = {"prior_one_sample": psnr(samples[0]),
-               f"prior_mean_of_{a.samples}": psnr(np.mean(samples, 0)),
-               "mean_colour_fill": psnr(fill), "mask_fraction": float(mc.mean())}
+        row = {"mask_fraction": float(mc.mean()), "observed_fraction": float(seen.sum() / mc.sum())}
+        row.update(scores("prior_one_sample", samples[0]))
+        row.update(scores(f"prior_mean_of_{a.samples}", np.mean(samples, 0)))
+        row.update(scores("mean_colour_fill", fill))
         for m in methods:
-            row[m] = psnr(crop(load(os.path.join(a.runs, m, "renders", name + "_rgb.png"))))
+            row.update(scores(m, crop(load(os.path.join(a.runs, m, "renders", name + "_rgb.png")))))
         rows[name] = row
         print(name, {k: round(v, 2) for k, v in row.items()}, flush=True)
-    keys = list(next(iter(rows.values())).keys())
-    mean = {k: float(np.mean([r[k] for r in rows.values()])) for k in keys}
+    keys = sorted({k for r in rows.values() for k in r})
+    mean = {k: float(np.mean([r[k] for r in rows.values() if k in r])) for k in keys}
     print("mean", {k: round(v, 2) for k, v in mean.items()})
     doc = {"diagnosis": "masked PSNR (dB) in the guidance crop of each test view",
            "scene": a.scene, "prior": a.prior, "resolution": a.resolution,
