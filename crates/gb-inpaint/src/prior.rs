@@ -19,7 +19,7 @@ use burn::tensor::{Device, Tensor};
 use gb_diffusion::checkpoint::{DiffusersFolder, WeightVariant};
 use gb_diffusion::clip::{load_text_encoder, ClipTextModel};
 use gb_diffusion::config::{
-    AutoencoderKLConfig, ClipTextConfig, SchedulerConfig, UNet2DConditionConfig,
+    AutoencoderKLConfig, ClipTextConfig, PredictionType, SchedulerConfig, UNet2DConditionConfig,
 };
 use gb_diffusion::distill::sd_adapter::{SdUnetEps, SdVaeEncoder};
 use gb_diffusion::distill::{
@@ -192,34 +192,23 @@ impl GuidancePrior {
                 "LoRA attached and merged"
             );
         }
-        let factor = vae_cfg.scale_factor();
-        let resolution = unet_cfg.sample_size.unwrap_or(64) * factor;
-        let info = PriorInfo {
-            folder: root.to_path_buf(),
-            lora: lora.map(Path::to_path_buf),
-            lora_unet_weights: n_unet,
-            lora_text_encoder_weights: n_text,
-            resolution,
-            vae_factor: factor,
-            num_train_timesteps: alphas.len(),
-        };
-        Ok(Self {
-            unet: Box::new(SdUnetEps::new(
-                unet,
-                unet_cfg.in_channels,
-                sched.prediction_type,
-                alphas.clone(),
-            )),
-            encoder: Box::new(SdVaeEncoder::new(vae.no_grad(), factor)),
-            text: Box::new(ClipEncoder {
-                tokenizer,
-                model: text,
-                device: device.clone(),
-            }),
+        let parts = Parts {
+            unet,
+            in_channels: unet_cfg.in_channels,
+            sample_size: unet_cfg.sample_size,
+            vae,
+            factor: vae_cfg.scale_factor(),
+            text,
+            tokenizer,
+            prediction: sched.prediction_type,
             alphas,
-            resolution,
-            info,
-        })
+        };
+        Ok(parts.into_prior(
+            root.to_path_buf(),
+            lora.map(Path::to_path_buf),
+            (n_unet, n_text),
+            device,
+        ))
     }
 
     /// A prior of the given shapes with random weights (no files but the tokenizer at
@@ -240,33 +229,70 @@ impl GuidancePrior {
             ClipTokenizer::from_dir(tokenizer_dir).map_err(|e| prior_err("tokenizer", &e))?;
         let sched = SchedulerConfig::default();
         let alphas = AlphasCumprod::from_config(&sched).map_err(|e| prior_err("scheduler", &e))?;
-        let factor = vae.scale_factor();
-        let resolution = unet.sample_size.unwrap_or(64) * factor;
-        let vae_model = AutoencoderKL::new(vae, &device.clone().autodiff());
-        Ok(Self {
+        let parts = Parts {
+            unet: UNet2DConditionModel::new(unet, device),
+            in_channels: unet.in_channels,
+            sample_size: unet.sample_size,
+            vae: AutoencoderKL::new(vae, &device.clone().autodiff()),
+            factor: vae.scale_factor(),
+            text: ClipTextModel::new(text, device),
+            tokenizer,
+            prediction: sched.prediction_type,
+            alphas,
+        };
+        Ok(parts.into_prior(PathBuf::from("random-weights"), None, (0, 0), device))
+    }
+}
+
+/// The networks of a prior, loaded or built, before [`GuidancePrior`] wraps them.
+struct Parts {
+    unet: UNet2DConditionModel,
+    in_channels: usize,
+    sample_size: Option<usize>,
+    /// On the autodiff device.
+    vae: AutoencoderKL,
+    factor: usize,
+    text: ClipTextModel,
+    tokenizer: ClipTokenizer,
+    prediction: PredictionType,
+    alphas: AlphasCumprod,
+}
+
+impl Parts {
+    /// Wraps the networks behind the distillation interfaces; `lora_weights` are the U-Net
+    /// and text-encoder weights a LoRA adapted.
+    fn into_prior(
+        self,
+        folder: PathBuf,
+        lora: Option<PathBuf>,
+        lora_weights: (usize, usize),
+        device: &Device,
+    ) -> GuidancePrior {
+        let resolution = self.sample_size.unwrap_or(64) * self.factor;
+        GuidancePrior {
+            info: PriorInfo {
+                folder,
+                lora,
+                lora_unet_weights: lora_weights.0,
+                lora_text_encoder_weights: lora_weights.1,
+                resolution,
+                vae_factor: self.factor,
+                num_train_timesteps: self.alphas.len(),
+            },
             unet: Box::new(SdUnetEps::new(
-                UNet2DConditionModel::new(unet, device),
-                unet.in_channels,
-                sched.prediction_type,
-                alphas.clone(),
+                self.unet,
+                self.in_channels,
+                self.prediction,
+                self.alphas.clone(),
             )),
-            encoder: Box::new(SdVaeEncoder::new(vae_model.no_grad(), factor)),
+            encoder: Box::new(SdVaeEncoder::new(self.vae.no_grad(), self.factor)),
             text: Box::new(ClipEncoder {
-                tokenizer,
-                model: ClipTextModel::new(text, device),
+                tokenizer: self.tokenizer,
+                model: self.text,
                 device: device.clone(),
             }),
-            info: PriorInfo {
-                folder: PathBuf::from("random-weights"),
-                lora: None,
-                lora_unet_weights: 0,
-                lora_text_encoder_weights: 0,
-                resolution,
-                vae_factor: factor,
-                num_train_timesteps: alphas.len(),
-            },
-            alphas,
+            alphas: self.alphas,
             resolution,
-        })
+        }
     }
 }

@@ -56,3 +56,29 @@ pub fn machine_description() -> serde_json::Value {
         .unwrap_or(0);
     serde_json::json!({ "cpu": cpu, "logical_cores": cores, "os": std::env::consts::OS, "arch": std::env::consts::ARCH })
 }
+
+/// The process's peak resident set (`VmHWM`) in MiB, weights included; `None` off Linux.
+pub fn peak_rss_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
+
+/// Writes `doc` as pretty JSON to `dir/name` (atomically, creating `dir`), prints it and
+/// where it went, and returns the path.
+pub fn write_report(
+    dir: &std::path::Path,
+    name: &str,
+    doc: &serde_json::Value,
+) -> anyhow::Result<std::path::PathBuf> {
+    use anyhow::Context;
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let path = dir.join(name);
+    let text = serde_json::to_string_pretty(doc)? + "\n";
+    gb_core::write_atomic(&path, text.as_bytes())
+        .with_context(|| format!("{}: cannot write", path.display()))?;
+    println!("{text}");
+    println!("written to {}", path.display());
+    Ok(path)
+}

@@ -79,14 +79,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "python": python,
         "largest_value_difference": agreement,
     });
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("{}: cannot create", args.out.display()))?;
-    let path = args.out.join(format!("eval-{device}.json"));
-    let text = serde_json::to_string_pretty(&doc)? + "\n";
-    gb_core::write_atomic(&path, text.as_bytes())
-        .with_context(|| format!("{}: cannot write", path.display()))?;
-    println!("{text}");
-    println!("written to {}", path.display());
+    super::bench::write_report(&args.out, &format!("eval-{device}.json"), &doc)?;
     Ok(())
 }
 

@@ -134,13 +134,6 @@ impl Drop for GpuMemoryPoll {
     }
 }
 
-fn peak_rss_mb() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb / 1024.0)
-}
-
 /// Waits for the device: reads one number that depends on `t`.
 fn sync<const D: usize>(t: Tensor<D>) -> f32 {
     t.sum().into_scalar::<f32>()
@@ -373,11 +366,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "projected_run_h": step_s * total_steps as f64 / 3600.0,
         "floor": { "tflop_per_guidance_step": args.floor_tflop, "at_peak": floors },
         "steps_failed": failure,
-        "peak_rss_mb": peak_rss_mb(),
+        "peak_rss_mb": super::bench::peak_rss_mb(),
         "gpu_memory_mib": gpu.as_ref().map(|_| json!({ "at_start": gpu_start, "peak": gpu_peak })),
     });
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("{}: cannot create", args.out.display()))?;
     let preset_name = std::path::Path::new(&args.preset)
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -387,15 +378,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         "folder".to_string()
     };
-    let path = args.out.join(format!(
-        "pipeline-{prior_name}-{preset_name}-{}.json",
-        kind.name()
-    ));
-    let text = serde_json::to_string_pretty(&doc)? + "\n";
-    gb_core::write_atomic(&path, text.as_bytes())
-        .with_context(|| format!("{}: cannot write", path.display()))?;
-    println!("{text}");
-    println!("written to {}", path.display());
+    let name = format!("pipeline-{prior_name}-{preset_name}-{}.json", kind.name());
+    super::bench::write_report(&args.out, &name, &doc)?;
     Ok(())
 }
 

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::time::Instant;
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use burn::module::Module;
 use burn::tensor::{Distribution, Tensor};
 use gb_core::BackendKind;
@@ -74,13 +74,6 @@ pub fn sd15_vae() -> anyhow::Result<AutoencoderKLConfig> {
     .map_err(|e| anyhow::anyhow!("built-in SD-1.5 config: {e}"))
 }
 
-fn peak_rss_mb() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb / 1024.0)
-}
-
 fn time_best(repeats: usize, mut f: impl FnMut()) -> f64 {
     f();
     (0..repeats.max(1))
@@ -121,7 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let out = unet.forward(x.clone(), &t, ehs.clone());
         let _ = out.into_data();
     });
-    let unet_rss = peak_rss_mb();
+    let unet_rss = super::bench::peak_rss_mb();
     drop(unet);
 
     let ad = device.clone().autodiff();
@@ -145,7 +138,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "unet_forward_s": unet_s,
         "unet_peak_rss_mb": unet_rss,
         "vae_encoder_fwd_bwd_s": vae_times,
-        "peak_rss_mb": peak_rss_mb(),
+        "peak_rss_mb": super::bench::peak_rss_mb(),
     });
     let python = run_python(&args);
     let ratio = |k: &str| -> Value {
@@ -178,14 +171,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "python": python,
         "ratio_rust_over_python": { "unet_forward": ratio("unet_forward_s"), "vae_encoder_fwd_bwd": vae_ratio },
     });
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("{}: cannot create", args.out.display()))?;
-    let path = args.out.join(format!("unet-{kind}.json"));
-    let text = serde_json::to_string_pretty(&doc)? + "\n";
-    gb_core::write_atomic(&path, text.as_bytes())
-        .with_context(|| format!("{}: cannot write", path.display()))?;
-    println!("{text}");
-    println!("written to {}", path.display());
+    super::bench::write_report(&args.out, &format!("unet-{kind}.json"), &doc)?;
     Ok(())
 }
 

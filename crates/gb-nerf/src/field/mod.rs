@@ -195,6 +195,24 @@ impl NerfField {
     }
 }
 
+/// A small hash field for the crate's unit tests.
+#[cfg(test)]
+pub(crate) fn tiny_hash_config() -> FieldConfig {
+    FieldConfig::Hash {
+        grid: HashGridConfig {
+            levels: 4,
+            features_per_level: 2,
+            log2_table_size: 10,
+            base_resolution: 4.0,
+            max_resolution: 32.0,
+            lookups: Default::default(),
+        },
+        hidden: 16,
+        geo_features: 7,
+        dir_freqs: 2,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -203,19 +221,7 @@ mod tests {
     fn both_fields_give_finite_positive_density_and_unit_colour() {
         let device = gb_core::BackendKind::Flex.device();
         let configs = [
-            FieldConfig::Hash {
-                grid: HashGridConfig {
-                    levels: 4,
-                    features_per_level: 2,
-                    log2_table_size: 10,
-                    base_resolution: 4.0,
-                    max_resolution: 32.0,
-                    lookups: Default::default(),
-                },
-                hidden: 16,
-                geo_features: 7,
-                dir_freqs: 2,
-            },
+            tiny_hash_config(),
             FieldConfig::Vanilla {
                 pos_freqs: 4,
                 dir_freqs: 2,

@@ -144,26 +144,12 @@ pub fn density_gradient_normals(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::{FieldConfig, HashGridConfig};
 
     /// A sample set over the chunk size is evaluated in chunks that agree with one call.
     #[test]
     fn chunked_field_evaluation_matches_one_call() {
         let device = gb_core::BackendKind::Flex.device();
-        let field = FieldConfig::Hash {
-            grid: HashGridConfig {
-                levels: 4,
-                features_per_level: 2,
-                log2_table_size: 10,
-                base_resolution: 4.0,
-                max_resolution: 32.0,
-                lookups: Default::default(),
-            },
-            hidden: 16,
-            geo_features: 7,
-            dir_freqs: 2,
-        }
-        .init(&device);
+        let field = crate::field::tiny_hash_config().init(&device);
         let n = FIELD_CHUNK_SAMPLES + 1234;
         let pts: Vec<[f32; 3]> = (0..n)
             .map(|i| {
