@@ -5,9 +5,9 @@
 //!
 //! `L = L_rgb(unmasked) + 0.1 L_depth(unmasked) + lambda_rgb L_rgb_guidance(mask) + lambda_normal L_normal_guidance(mask)`
 //!
-//! - [`method`]: the method configurations (`configs/methods/*.toml`: gb-nerf, bsd,
-//!   mvip-nerf, spin-nerf-sds, csd, none, pre-inpainted), prompts, and how lambda maps to
-//!   the paper's scale;
+//! - [`method`]: the method configurations (`configs/methods/*.toml`: gb-nerf,
+//!   gb-nerf-unseen, bsd, mvip-nerf, spin-nerf-sds, csd, none, pre-inpainted), prompts, and
+//!   how lambda maps to the paper's scale;
 //! - [`prior`]: loading the prior folder and attaching a LoRA;
 //! - [`crop`]: the mask's bounding-box crop, rendered at the prior's resolution (RGB, pasted
 //!   on the ground truth or not) and as a normal map;
@@ -18,6 +18,8 @@
 //! - [`metrics`]: every `gb_eval` metric that applies to a run's test views;
 //! - [`report`], [`svg`], [`gif`]: the run's `report.html`, its SVG charts (a small writer of
 //!   our own rather than a plotting crate, see [`svg`]) and the orbit animation;
+//! - [`visibility`]: visibility-aware guidance (the prior acts only where no training view
+//!   sees the surface);
 //! - [`ablate`]: the tables of `cargo xtask ablate` (baselines, ablation, w3 sweep).
 //!
 //! The command line is `cargo xtask inpaint` (xtask/src/cmd/inpaint.rs).
@@ -34,6 +36,7 @@ pub mod prior;
 pub mod report;
 pub mod svg;
 pub mod trainer;
+pub mod visibility;
 
 pub use error::InpaintError;
 pub use guidance::Modality;

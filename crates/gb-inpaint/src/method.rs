@@ -72,12 +72,17 @@ use gb_diffusion::distill::{
 use serde::{Deserialize, Serialize};
 
 use crate::error::InpaintError;
+use crate::visibility::VisibilityConfig;
 
 /// The built-in methods: name and TOML text (`configs/methods/NAME.toml`).
 pub const BUILTIN_METHODS: &[(&str, &str)] = &[
     (
         "gb-nerf",
         include_str!("../../../configs/methods/gb-nerf.toml"),
+    ),
+    (
+        "gb-nerf-unseen",
+        include_str!("../../../configs/methods/gb-nerf-unseen.toml"),
     ),
     ("bsd", include_str!("../../../configs/methods/bsd.toml")),
     (
@@ -421,6 +426,10 @@ pub struct MethodConfig {
     /// Normal-map guidance.
     #[serde(default)]
     pub normal: GuidanceConfig,
+    /// Visibility-aware guidance: how much the guidance acts on pixels that other training
+    /// views observe (off by default; see [`crate::visibility`]).
+    #[serde(default)]
+    pub visibility: VisibilityConfig,
     /// Test hooks.
     #[serde(default, skip_serializing_if = "DebugHooks::is_default")]
     pub debug: DebugHooks,
@@ -523,6 +532,9 @@ impl MethodConfig {
         }
         if self.max_consecutive_nan == 0 {
             return Err("max_consecutive_nan must be >= 1".into());
+        }
+        if let Some(msg) = self.visibility.check() {
+            return Err(msg.into());
         }
         self.rgb.settings("rgb")?;
         self.normal.settings("normal")?;

@@ -399,3 +399,63 @@ fn pre_inpainted_images_and_depths_replace_the_masked_views() {
     }
     assert!(d.iter().any(|z| *z > 0.0));
 }
+
+/// The field gradients of one RGB term and one normal term of the first guided view, at a
+/// fixed timestep and noise.
+fn term_grads(t: &mut GuidedTrainer) -> Vec<Vec<f32>> {
+    let view = t.guidance.as_ref().unwrap().views[0];
+    let dims = t.guidance.as_ref().unwrap().prior.info.resolution / 4;
+    let noise: Vec<f32> = (0..4 * dims * dims)
+        .map(|i| ((i * 7919) % 1000) as f32 / 500.0 - 1.0)
+        .collect();
+    let mut out = Vec::new();
+    for modality in [Modality::Rgb, Modality::Normal] {
+        let (image, _) = match modality {
+            Modality::Rgb => t.rgb_prior_input(view).unwrap(),
+            Modality::Normal => t.normal_prior_input(view).unwrap(),
+        };
+        let n = Tensor::<4>::from_data(
+            TensorData::new(noise.clone(), [1, 4, dims, dims]),
+            &KIND.device(),
+        );
+        let term = t.term(modality, view, image, 0, Some((400, n))).unwrap();
+        let (g, _) = param_grads(&t.field, &term.loss.backward());
+        out.push(g);
+    }
+    out
+}
+
+#[test]
+fn visibility_gating_scales_the_guidance_that_reaches_the_field() {
+    let _g = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let plain = term_grads(&mut guided(&s, dir.path(), "bsd", |_| {}));
+    // before `visibility.start_step` every pixel counts as observed: a uniform 0.5
+    let mut half = guided(&s, dir.path(), "bsd", |m| {
+        m.visibility.observed_weight = 0.5;
+        m.visibility.start_step = m.reference_steps;
+    });
+    assert_eq!(half.visibility_start(), 3);
+    let gated = term_grads(&mut half);
+    for (modality, (a, b)) in ["rgb", "normal"].iter().zip(plain.iter().zip(&gated)) {
+        assert!(b.iter().any(|x| x.abs() > 0.0), "{modality}: no gradient");
+        let halved: Vec<f32> = a.iter().map(|x| 0.5 * x).collect();
+        let e = max_rel(b, &halved);
+        assert!(
+            e < 1e-4,
+            "{modality}: gated gradient is not half the plain one ({e})"
+        );
+    }
+    // at weight 0 the terms before the start would carry nothing: they are not computed
+    let mut off = guided(&s, dir.path(), "bsd", |m| {
+        m.visibility.observed_weight = 0.0;
+        m.visibility.start_step = m.reference_steps;
+    });
+    let rec = off.train_step().unwrap();
+    assert!(rec.guidance.is_empty(), "{:?}", rec.guidance.len());
+    // an out-of-range weight is refused when the method is read
+    let mut bad = MethodConfig::builtin("bsd").unwrap();
+    bad.visibility.observed_weight = 2.0;
+    assert!(bad.validate().unwrap_err().contains("observed_weight"));
+}

@@ -33,6 +33,7 @@ fn config(steps: usize, occupancy: bool) -> NerfConfig {
             lr_decay: 0.1,
             lr_decay_steps: 1000,
             depth_weight: 0.1,
+            distortion_weight: 0.0,
             checkpoint_every: 0,
             image_downscale: 1,
             seed: 3,

@@ -57,9 +57,46 @@ pub struct Args {
     /// (every 8th view held out).
     #[arg(long, default_value = "stairs,fern")]
     pub accuracy_scenes: String,
+    /// Also measure the test-view PSNR every this many steps of each accuracy run (0: only
+    /// at the end): the held-out curve that shows where a preset stops improving. The
+    /// evaluations are not counted in `train_seconds`.
+    #[arg(long, default_value_t = 0)]
+    pub curve_every: usize,
     /// Output folder.
     #[arg(long, default_value = "bench/results")]
     pub out: PathBuf,
+}
+
+/// Trains `t` to completion; with `every > 0` also records `(step, train seconds, test
+/// PSNR)` every `every` steps (evaluation time excluded). Returns the training seconds.
+fn train_with_curve(
+    t: &mut Trainer,
+    scene: &Scene,
+    every: usize,
+    curve: &mut Vec<serde_json::Value>,
+) -> anyhow::Result<f64> {
+    if every == 0 {
+        return Ok(t.fit(None, true)?.seconds);
+    }
+    let steps = t.config.train.steps;
+    let bar = indicatif::ProgressBar::new(steps as u64);
+    let mut seconds = 0.0;
+    while t.step < steps {
+        let t0 = std::time::Instant::now();
+        let stats = t.train_step();
+        seconds += t0.elapsed().as_secs_f64();
+        bar.set_position(t.step as u64);
+        bar.set_message(format!("psnr {:.2}", stats.psnr));
+        if t.step.is_multiple_of(every) && t.step < steps {
+            let psnr = test_psnr(t, scene)?;
+            tracing::info!(step = t.step, psnr, seconds, "held-out curve");
+            curve.push(
+                json!({ "step": t.step, "train_seconds": seconds, "psnr_test_unmasked": psnr }),
+            );
+        }
+    }
+    bar.finish_and_clear();
+    Ok(seconds)
 }
 
 fn stairs(dir: &std::path::Path) -> anyhow::Result<Scene> {
@@ -221,21 +258,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             for preset in args.accuracy_presets.split(',') {
                 let cfg = NerfConfig::preset(preset.trim())?;
                 let mut t = Trainer::new(&acc_scene, cfg, args.accuracy_device)?;
-                let s = t.fit(None, true)?;
+                let mut curve = Vec::new();
+                let seconds = train_with_curve(&mut t, &acc_scene, args.curve_every, &mut curve)?;
                 let mean = test_psnr(&t, &acc_scene)?;
-                tracing::info!(
-                    scene = name,
-                    preset,
-                    psnr = mean,
-                    seconds = s.seconds,
-                    "nerf accuracy"
-                );
+                if args.curve_every > 0 {
+                    curve.push(json!({ "step": t.step, "train_seconds": seconds,
+                        "psnr_test_unmasked": mean }));
+                }
+                tracing::info!(scene = name, preset, psnr = mean, seconds, "nerf accuracy");
                 if let Some(a) = report["accuracy"].as_array_mut() {
                     a.push(json!({ "preset": preset, "scene": name,
                         "device": args.accuracy_device.name(),
-                        "steps": t.config.train.steps, "train_seconds": s.seconds,
+                        "steps": t.config.train.steps, "train_seconds": seconds,
                         "test_views": acc_scene.split(Split::Test).count(),
-                        "psnr_test_unmasked": mean }));
+                        "psnr_test_unmasked": mean, "curve": curve }));
                 }
                 gb_core::write_atomic(&path, &serde_json::to_vec_pretty(&report)?)?;
             }

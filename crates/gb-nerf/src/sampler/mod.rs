@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 pub use occupancy::{OccupancyConfig, OccupancyGrid};
 pub use space::{SceneSpace, Spacing};
-pub use stratified::sample_rays;
+pub use stratified::{normalized_positions, sample_rays};
 
 /// A batch of rays `o + t d`. `d` is scaled so that its camera-space z component is -1,
 /// which makes `t` the z-depth of the scene model.

@@ -7,6 +7,38 @@ use super::{OccupancyGrid, RayBatch, SampleSet, SceneSpace, Spacing};
 /// Estimated transmittance below which the rest of a ray is not evaluated.
 pub const MIN_TRANSMITTANCE: f32 = 1e-4;
 
+/// Each sample's position in its ray's normalised sampling coordinate `u` in `[0, 1]`
+/// (near to far, uniform in `spacing`: distance or inverse distance), the coordinate in
+/// which [`sample_rays`] spaces its bins evenly; every bin is `1 / samples` wide in it.
+/// Rays that miss the volume get 0. Used by the distortion loss.
+pub fn normalized_positions(rays: &RayBatch, samples: &SampleSet, spacing: Spacing) -> Vec<f32> {
+    let s = samples.samples;
+    let mut out = Vec::with_capacity(samples.t.len());
+    for r in 0..samples.rays {
+        let (t0, t1) = (rays.near[r], rays.far[r]);
+        let hit = t0 < t1 && t0.is_finite() && t1.is_finite();
+        for &t in &samples.t[r * s..(r + 1) * s] {
+            let u = if !hit {
+                0.0
+            } else {
+                match spacing {
+                    Spacing::Linear => (t - t0) / (t1 - t0),
+                    Spacing::InverseDepth => {
+                        let (a, b) = (1.0 / t0.max(1e-12), 1.0 / t1.max(1e-12));
+                        (a - 1.0 / t.max(1e-12)) / (a - b)
+                    }
+                }
+            };
+            out.push(if u.is_finite() {
+                u.clamp(0.0, 1.0)
+            } else {
+                0.0
+            });
+        }
+    }
+    out
+}
+
 /// Samples `samples` stratified points per ray: the ray's interval is split into equal bins
 /// (in distance, or in inverse distance for [`Spacing::InverseDepth`]); each sample lies at
 /// a uniformly jittered position in its bin (`rng` given) or at the bin centre, and
@@ -120,6 +152,45 @@ mod tests {
             assert!(*t >= 1.0 + 0.25 * i as f32 - 1e-6 && *t <= 1.0 + 0.25 * (i + 1) as f32 + 1e-6);
         }
         assert_eq!(s.slots.len(), 8);
+    }
+
+    #[test]
+    fn bin_centres_are_evenly_spaced_in_the_normalised_coordinate() {
+        let rays = one_ray(1.0, 3.0);
+        for spacing in [Spacing::Linear, Spacing::InverseDepth] {
+            let mut set = SampleSet {
+                rays: 1,
+                samples: 4,
+                ..Default::default()
+            };
+            let (a, b) = (1.0f32, 1.0 / 3.0);
+            set.t = (0..4)
+                .map(|i| {
+                    let u = (i as f32 + 0.5) / 4.0;
+                    match spacing {
+                        Spacing::Linear => 1.0 + 2.0 * u,
+                        Spacing::InverseDepth => 1.0 / (a + (b - a) * u),
+                    }
+                })
+                .collect();
+            let u = normalized_positions(&rays, &set, spacing);
+            for (i, v) in u.iter().enumerate() {
+                assert!(
+                    (v - (i as f32 + 0.5) / 4.0).abs() < 1e-5,
+                    "{spacing:?}: {u:?}"
+                );
+            }
+        }
+        let mut empty = SampleSet {
+            rays: 1,
+            samples: 2,
+            ..Default::default()
+        };
+        empty.t = vec![3.0, 3.0];
+        assert_eq!(
+            normalized_positions(&one_ray(3.0, 3.0), &empty, Spacing::Linear),
+            [0.0, 0.0]
+        );
     }
 
     #[test]

@@ -16,13 +16,13 @@ use rand_chacha::ChaCha8Rng;
 
 use super::checkpoint::{self, CheckpointMeta, CheckpointParts};
 use super::data::TrainData;
-use super::losses::{disparity_loss, mse, psnr_from_mse};
+use super::losses::{disparity_loss, distortion_loss, mse, psnr_from_mse};
 use super::{NerfConfig, NerfError};
 use crate::field::NerfField;
 use crate::render::image::{render_image, ImageRender, ImageSettings};
 use crate::render::rays::camera_rays;
 use crate::render::{render_rays, Background};
-use crate::sampler::{sample_rays, OccupancyGrid, RayBatch, SceneSpace};
+use crate::sampler::{normalized_positions, sample_rays, OccupancyGrid, RayBatch, SceneSpace};
 use crate::scene::{Camera, Scene};
 
 /// Loss and quality of one training step.
@@ -199,6 +199,14 @@ impl Trainer {
         let target = Tensor::<2>::from_data(TensorData::new(rgb, [n, 3]), &device);
         let rgb_loss = mse(out.rgb, target);
         let mut loss = rgb_loss.clone();
+        if self.config.train.distortion_weight > 0.0 {
+            let s = samples.samples;
+            let u = normalized_positions(&rays, &samples, self.space.spacing());
+            let u = Tensor::<2>::from_data(TensorData::new(u, [n, s]), &device);
+            let width = Tensor::<2>::full([n, s], 1.0 / s as f32, &device);
+            let dl = distortion_loss(out.weights.clone(), u, width);
+            loss = loss + dl.mul_scalar(self.config.train.distortion_weight);
+        }
         if self.has_depth && self.config.train.depth_weight > 0.0 {
             let gt = Tensor::<1>::from_data(TensorData::new(disp, [n]), &device);
             let valid = Tensor::<1>::from_data(TensorData::new(valid, [n]), &device);
