@@ -132,13 +132,12 @@ fn gb_nerf_runs_with_bsd_on_rgb_and_normals_and_the_lora() {
 
 #[test]
 fn gb_nerf_unseen_runs_with_visibility_aware_guidance() {
-    // 3 steps: the maps start at step 5000 * 3 / 10000 = 1; at weight 0 the step before
-    // carries no gradient and is not guided
+    // 3 steps: the maps start at step 2000 * 3 / 10000 = 0, so every step is guided
     runs_guiding(
         "gb-nerf-unseen",
         &["--prior", PRIOR, "--lora", LORA],
         &[("rgb", 2), ("normal", 2)],
-        2,
+        3,
         |_| {},
     );
 }

@@ -2,7 +2,7 @@
 //! module turns the runs' `metrics.json` into the paper's two tables and the w3 sweep):
 //!
 //! - **baselines**: rows [`BASELINE_ROWS`] (no prior, SPIn-NeRF-style SDS, MVIP-NeRF, CSD,
-//!   GB-NeRF);
+//!   GB-NeRF, and this project's visibility-aware GB-NeRF);
 //! - **ablation**: rows [`ABLATION_ROWS`]: the origin (MVIP-NeRF-like SDS on RGB and
 //!   normals, no LoRA), +LoRA (`sds-lora`), +BSD (`bsd`), +LoRA+BSD (`gb-nerf`);
 //! - **w3 sweep**: `csd` with w3 in a list (default [`DEFAULT_W3`]).
@@ -23,6 +23,7 @@ pub const BASELINE_ROWS: &[(&str, &str)] = &[
     ("MVIP-NeRF (SDS, RGB + normals)", "mvip-nerf"),
     ("CSD", "csd"),
     ("GB-NeRF (ours)", "gb-nerf"),
+    ("GB-NeRF, unseen pixels only", "gb-nerf-unseen"),
 ];
 
 /// Ablation: (row label, method).
