@@ -572,11 +572,22 @@ impl MethodConfig {
         self.normal.settings("normal").ok().flatten()
     }
 
+    /// `step` (counted out of `reference_steps`) in a run of `total_steps` steps:
+    /// `step * total_steps / reference_steps` (rounded down).
+    fn scaled_to_run(&self, step: usize, total_steps: usize) -> usize {
+        ((step as u128 * total_steps as u128) / self.reference_steps.max(1) as u128) as usize
+    }
+
     /// The first step of the normal guidance in a run of `total_steps` steps:
     /// `normal_start_step * total_steps / reference_steps` (rounded down).
     pub fn normal_start_for(&self, total_steps: usize) -> usize {
-        ((self.normal_start_step as u128 * total_steps as u128) / self.reference_steps as u128)
-            as usize
+        self.scaled_to_run(self.normal_start_step, total_steps)
+    }
+
+    /// The first step of the visibility maps in a run of `total_steps` steps
+    /// (`visibility.start_step`, scaled like [`Self::normal_start_for`]).
+    pub fn visibility_start_for(&self, total_steps: usize) -> usize {
+        self.scaled_to_run(self.visibility.start_step, total_steps)
     }
 
     /// The prompts of a run: the templates with the scene's captions filled in, then the

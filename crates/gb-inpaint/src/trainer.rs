@@ -489,8 +489,8 @@ impl GuidedTrainer {
 
     /// The first step of the visibility maps (`visibility.start_step` scaled to the run).
     pub fn visibility_start(&self) -> usize {
-        self.method.visibility.start_step * self.nerf.config.train.steps
-            / self.method.reference_steps.max(1)
+        self.method
+            .visibility_start_for(self.nerf.config.train.steps)
     }
 
     /// The per-pixel gradient weights `[1, 1, r, r]` of `view`'s prior input (`None` when

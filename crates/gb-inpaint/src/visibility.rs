@@ -20,13 +20,15 @@
 //! sees the whole crop, but only the unobserved part of the field learns from it. The map
 //! is recomputed from the current field every `refresh_every` steps, since the depth it
 //! relies on is learned during the run; before `start_step` (scaled to the run like
-//! `normal_start_step`) there is no geometry to test and every pixel counts as observed. `observed_weight = 1` (the default) turns it off
-//! and leaves a method exactly as before.
+//! `normal_start_step`) there is no geometry to test and every pixel counts as observed.
+//! `observed_weight = 1` (the default) turns it off and leaves a method exactly as before.
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
+use gb_nerf::field::NerfField;
 use gb_nerf::render::rays::{all_pixels, camera_rays};
 use gb_nerf::render::render_rays;
+use gb_nerf::sampler::RayBatch;
 use gb_nerf::train::data::TrainView;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -139,18 +141,20 @@ impl ObservedMap {
         let camera = geometry.camera(rv);
         let grid = all_pixels(rv, rv);
         let pixels: Vec<[f32; 2]> = geometry.masked.iter().map(|&i| grid[i]).collect();
+        let field = ctx.field.valid();
         let rays = camera_rays(&camera, &pixels, ctx.space, ctx.near, ctx.far);
-        let depth = render_depth(ctx, &rays);
+        let depth = render_depth(&field, ctx, &rays);
         let points: Vec<[f32; 3]> = (0..pixels.len())
             .map(|k| {
                 let (o, d) = (rays.origins[k], rays.dirs[k]);
                 [0, 1, 2].map(|i| o[i] + depth[k] * d[i])
             })
             .collect();
-        // candidate (point, other view pixel) pairs: in the image, outside its mask
+        // candidate (point, other view pixel) pairs: in the image, outside its mask; the
+        // depth each other view renders through its candidate pixels
         let mut owner = Vec::new();
         let mut expected = Vec::new();
-        let mut cand = gb_nerf::sampler::RayBatch::default();
+        let mut seen = Vec::new();
         for (j, other) in views.iter().enumerate() {
             if j == index {
                 continue;
@@ -177,12 +181,8 @@ impl ObservedMap {
                 expected.push(z);
             }
             let r = camera_rays(cam, &px_list, ctx.space, ctx.near, ctx.far);
-            cand.origins.extend(r.origins);
-            cand.dirs.extend(r.dirs);
-            cand.near.extend(r.near);
-            cand.far.extend(r.far);
+            seen.extend(render_depth(&field, ctx, &r));
         }
-        let seen = render_depth(ctx, &cand);
         let mut hit = vec![false; pixels.len()];
         for ((k, z), d) in owner.iter().zip(&expected).zip(&seen) {
             if (d - z).abs() <= cfg.depth_tolerance * z.abs().max(1e-6) {
@@ -223,22 +223,21 @@ impl ObservedMap {
     }
 }
 
-/// The z-depth rendered along `rays` (no graph), in chunks.
-fn render_depth(ctx: &RenderContext<'_>, rays: &gb_nerf::sampler::RayBatch) -> Vec<f32> {
-    let field = ctx.field.valid();
+/// The z-depth that `field` (a no-graph copy) renders along `rays`, in chunks.
+fn render_depth(field: &NerfField, ctx: &RenderContext<'_>, rays: &RayBatch) -> Vec<f32> {
     let mut out = Vec::with_capacity(rays.len());
     let n = rays.len();
     let mut start = 0;
     while start < n {
         let end = (start + RAY_CHUNK).min(n);
-        let chunk = gb_nerf::sampler::RayBatch {
+        let chunk = RayBatch {
             origins: rays.origins[start..end].to_vec(),
             dirs: rays.dirs[start..end].to_vec(),
             near: rays.near[start..end].to_vec(),
             far: rays.far[start..end].to_vec(),
         };
         let (o, _) = render_rays::<ChaCha8Rng>(
-            &field,
+            field,
             ctx.space,
             &chunk,
             ctx.samples_per_ray,
