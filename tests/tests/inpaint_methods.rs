@@ -385,3 +385,46 @@ fn without_method_and_prior_the_default_runs() {
     let cfg = std::fs::read_to_string(out.join("config.toml")).unwrap();
     assert!(cfg.contains("tiny-prior"), "{cfg}");
 }
+
+#[test]
+fn a_real_scene_without_test_views_is_scored_without_a_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let preset = small_preset(dir.path(), None);
+    let statue = gb_core::test_data_dir().join("data/statue");
+    let out = dir.path().join("statue-run");
+    let extra = ["--method", "none", "--steps", "20", "--orbit-frames", "0"];
+    check(
+        &inpaint(&statue, &preset, &out, &extra),
+        "inpaint on statue",
+    );
+    let m = metrics(&out);
+    assert_eq!(m["test_views"], 0);
+    let eval = &m["eval"];
+    // the first 3 masked training views, rendered and scored
+    assert_eq!(eval["n_images"], 3, "{eval}");
+    for image in eval["per_image"].as_array().unwrap() {
+        let name = image["name"].as_str().unwrap();
+        assert!(name.starts_with("train_IMG_"), "{name}");
+        for kind in ["rgb", "depth", "normal"] {
+            assert!(out.join(format!("renders/{name}_{kind}.png")).is_file());
+        }
+        for k in ["brisque", "brisque_bbox"] {
+            let v = image[k]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{name} {k}: {image}"));
+            assert!((0.0..=100.0).contains(&v), "{name} {k} = {v}");
+        }
+        assert_ne!(image["brisque"], image["brisque_bbox"]);
+    }
+    for k in ["psnr", "ssim", "lpips", "d_psnr", "fid"] {
+        assert!(eval[k].is_null(), "{k}: {}", eval[k]);
+        let why = eval["unavailable"][k].as_str().unwrap();
+        assert!(why.contains("no test view with ground truth"), "{k}: {why}");
+    }
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    for image in eval["per_image"].as_array().unwrap() {
+        let src = format!("renders/{}_rgb.png", image["name"].as_str().unwrap());
+        assert!(page.contains(&src), "report.html does not show {src}");
+    }
+    assert!(page.contains("BRISQUE"), "the metric table has no BRISQUE");
+}

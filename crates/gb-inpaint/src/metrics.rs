@@ -10,7 +10,13 @@
 //! - `fid` and `d_fid` when there are at least [`FID_MIN_IMAGES`] test views and the
 //!   Inception weights are in the weights folder;
 //! - `brisque` (no reference) with OpenCV's LIVE model, and `nima` with its weights, when the
-//!   weights folder holds them.
+//!   weights folder holds them, over the whole render and (`brisque_bbox`, `nima_bbox`) over
+//!   the crop of the mask's bounding box, which holds the filled region.
+//!
+//! A scene without ground truth (a real capture such as SPIn-NeRF's `statue` without its
+//! test views) is scored by [`evaluate_without_reference`]: the no-reference metrics of the
+//! renders of its masked training views, where the object was removed; every full-reference
+//! metric is unavailable, with that reason.
 //!
 //! A metric that cannot be computed is recorded as unavailable with its reason, never as a
 //! number (`report.values[key] = Outcome::Unavailable(reason)`).
@@ -28,6 +34,46 @@ use gb_eval::{psnr, ssim, MetricError, Region};
 /// but the Frechet distance of a handful of 2048-dimensional features is dominated by the
 /// covariance estimate's noise; below this count the metric is reported unavailable.
 pub const FID_MIN_IMAGES: usize = 8;
+
+/// A render scored without a reference: a masked training view of a scene that has no test
+/// view with ground truth.
+#[derive(Debug, Clone)]
+pub struct RenderOnly {
+    /// View name (file stem).
+    pub name: String,
+    /// The render.
+    pub pred: RgbImage,
+    /// The object mask (row-major, the render's size), whose bounding box is the `_bbox` crop.
+    pub mask: Option<Vec<bool>>,
+}
+
+/// The input of the no-reference metrics: name, render, mask.
+type Scored<'a> = (&'a str, &'a RgbImage, Option<&'a [bool]>);
+
+/// Smallest side of a mask-box crop scored by BRISQUE / NIMA: below it the local statistics
+/// (7x7 windows at two scales) describe the crop's border more than its content.
+pub const NO_REFERENCE_MIN_CROP: usize = 32;
+
+/// The crop of `img` to its mask's bounding box, or why there is none.
+fn bbox_crop(img: &RgbImage, mask: Option<&[bool]>) -> Result<RgbImage, String> {
+    let mask = mask.ok_or("no mask")?;
+    let Some(Region::BBox { x0, y0, x1, y1 }) = Region::bbox_of_mask(mask, img.width) else {
+        return Err(MetricError::EmptyMask.to_string());
+    };
+    let (w, h) = (x1 - x0, y1 - y0);
+    if w < NO_REFERENCE_MIN_CROP || h < NO_REFERENCE_MIN_CROP {
+        return Err(format!(
+            "the mask box is {w}x{h}, under the {NO_REFERENCE_MIN_CROP}-pixel minimum"
+        ));
+    }
+    let mut out = RgbImage::filled(w, h, [0.0; 3]);
+    for y in 0..h {
+        for x in 0..w {
+            out.set(x, y, img.get(x0 + x, y0 + y));
+        }
+    }
+    Ok(out)
+}
 
 /// One evaluated test view.
 #[derive(Debug, Clone)]
@@ -231,9 +277,53 @@ pub fn evaluate(views: &[ViewPair], opts: &MetricOptions) -> EvalReport {
     fid_metrics(&mut report, views, opts, !with_depth.is_empty());
 
     // no-reference metrics of the renders
-    brisque(&mut report, views, opts);
-    nima(&mut report, views, opts);
+    let scored: Vec<Scored> = views
+        .iter()
+        .map(|v| (v.name.as_str(), &v.pred, v.mask.as_deref()))
+        .collect();
+    no_reference(&mut report, &scored, opts);
     report
+}
+
+/// Evaluates renders without ground truth (see the module docs): `brisque` / `nima` over the
+/// whole render and `_bbox` over the mask box; the full-reference metrics are unavailable.
+/// Never fails, like [`evaluate`].
+pub fn evaluate_without_reference(views: &[RenderOnly], opts: &MetricOptions) -> EvalReport {
+    let names: Vec<String> = views.iter().map(|v| v.name.clone()).collect();
+    let mut report = EvalReport::new(&names);
+    report
+        .context
+        .insert("device".into(), opts.device.name().to_string());
+    report.context.insert(
+        "views".into(),
+        "masked training views (the scene has no test view with ground truth)".into(),
+    );
+    if let Some(w) = &opts.weights {
+        report
+            .context
+            .insert("weights".into(), w.display().to_string());
+    }
+    for key in ["psnr", "ssim", "lpips", "d_psnr", "fid", "d_fid"] {
+        report.set_unavailable(key, "the scene has no test view with ground truth");
+    }
+    let scored: Vec<Scored> = views
+        .iter()
+        .map(|v| (v.name.as_str(), &v.pred, v.mask.as_deref()))
+        .collect();
+    if scored.is_empty() {
+        for key in ["brisque", "brisque_bbox", "nima", "nima_bbox"] {
+            report.set_unavailable(key, "no render to score");
+        }
+    } else {
+        no_reference(&mut report, &scored, opts);
+    }
+    report
+}
+
+/// BRISQUE and NIMA of the renders, whole and in the mask box.
+fn no_reference(report: &mut EvalReport, views: &[Scored], opts: &MetricOptions) {
+    brisque(report, views, opts);
+    nima(report, views, opts);
 }
 
 fn fid_metrics(report: &mut EvalReport, views: &[ViewPair], opts: &MetricOptions, depth: bool) {
@@ -293,44 +383,58 @@ fn fid_metrics(report: &mut EvalReport, views: &[ViewPair], opts: &MetricOptions
     }
 }
 
-fn brisque(report: &mut EvalReport, views: &[ViewPair], opts: &MetricOptions) {
+/// Scores every render (`key`) and its mask-box crop (`key_bbox`, when a view has a mask).
+fn score_renders(
+    report: &mut EvalReport,
+    views: &[Scored],
+    key: &str,
+    score: impl Fn(&RgbImage) -> Result<f64, String>,
+) {
+    let mut full = Values::new(key.into());
+    let mut bbox = Values::new(format!("{key}_bbox"));
+    for (name, pred, mask) in views {
+        full.push(name, score(pred));
+        // every view, so that the values stay aligned with the views: one without a mask
+        // makes the key unavailable, naming it
+        bbox.push(name, bbox_crop(pred, *mask).and_then(|c| score(&c)));
+    }
+    full.store(report);
+    if views.iter().any(|(_, _, m)| m.is_some()) {
+        bbox.store(report);
+    }
+}
+
+fn brisque(report: &mut EvalReport, views: &[Scored], opts: &MetricOptions) {
     use gb_eval::brisque::{Brisque, OPENCV_MODEL_FILE, OPENCV_RANGE_FILE};
     let model = opts
         .file(OPENCV_MODEL_FILE, "--weights")
         .and_then(|m| Ok((m, opts.file(OPENCV_RANGE_FILE, "--weights")?)))
         .and_then(|(m, r)| Brisque::load_opencv(&m, &r).map_err(|e| e.to_string()));
-    let mut vals = Values::new("brisque".into());
     match model {
-        Ok(model) => {
-            for v in views {
-                vals.push(&v.name, model.score(&v.pred).map_err(|e| e.to_string()));
-            }
-            vals.store(report);
+        Ok(model) => score_renders(report, views, "brisque", |img| {
+            model.score(img).map_err(|e| e.to_string())
+        }),
+        Err(reason) => {
+            report.set_unavailable("brisque", reason.clone());
+            report.set_unavailable("brisque_bbox", reason);
         }
-        Err(reason) => report.set_unavailable("brisque", reason),
     }
 }
 
-fn nima(report: &mut EvalReport, views: &[ViewPair], opts: &MetricOptions) {
+fn nima(report: &mut EvalReport, views: &[Scored], opts: &MetricOptions) {
     use gb_eval::nima::{nima_score, Nima, WEIGHTS_FILE};
     let model = opts
         .file(WEIGHTS_FILE, "--weights")
         .and_then(|p| Nima::load(&p, &opts.device.device()).map_err(|e| e.to_string()));
     match model {
-        Ok(model) => {
-            let mut vals = Values::new("nima".into());
-            for v in views {
-                vals.push(
-                    &v.name,
-                    nima_score(&model, &v.pred).map_err(|e| e.to_string()),
-                );
-            }
-            vals.store(report);
+        Ok(model) => score_renders(report, views, "nima", |img| {
+            nima_score(&model, img).map_err(|e| e.to_string())
+        }),
+        Err(reason) => {
+            let why = format!("{reason} (no NIMA weights ship with the project)");
+            report.set_unavailable("nima", why.clone());
+            report.set_unavailable("nima_bbox", why);
         }
-        Err(reason) => report.set_unavailable(
-            "nima",
-            format!("{reason} (no NIMA weights ship with the project)"),
-        ),
     }
 }
 
@@ -396,5 +500,115 @@ mod tests {
             unreachable!()
         };
         assert!(why.contains("1 test view"), "{why}");
+    }
+
+    /// Box blur of radius `r` inside `[x0, x1) x [y0, y1)`, repeated `times`.
+    fn blur_box(
+        img: &RgbImage,
+        (x0, y0, x1, y1): (usize, usize, usize, usize),
+        r: usize,
+        times: usize,
+    ) -> RgbImage {
+        let mut out = img.clone();
+        for _ in 0..times {
+            let src = out.clone();
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let mut acc = [0.0f32; 3];
+                    let mut n = 0.0;
+                    for yy in y.saturating_sub(r)..(y + r + 1).min(img.height) {
+                        for xx in x.saturating_sub(r)..(x + r + 1).min(img.width) {
+                            let p = src.get(xx, yy);
+                            (0..3).for_each(|c| acc[c] += p[c]);
+                            n += 1.0;
+                        }
+                    }
+                    out.set(x, y, acc.map(|v| v / n));
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn renders_without_reference_get_brisque_whole_and_in_the_mask_box() {
+        let data = gb_core::test_data_dir();
+        let weights = data.join("weights");
+        let photo = data.join("data/rgb_normal_sample/000000_img.png");
+        let photo = gb_core::read_rgb(&photo, None).unwrap();
+        let (w, h) = (photo.width, photo.height);
+        let (x0, y0, x1, y1) = (w / 3, h / 3, w / 3 + 160, h / 3 + 120);
+        let mut mask = vec![false; w * h];
+        for y in y0..y1 {
+            for x in x0..x1 {
+                mask[y * w + x] = true;
+            }
+        }
+        // the "filled" box of a render: the photo, blurred inside the mask box as a weak
+        // fill is
+        let pred = blur_box(&photo, (x0, y0, x1, y1), 3, 3);
+        let mut tiny = vec![false; w * h];
+        tiny[10 * w + 10] = true;
+        let opts = MetricOptions {
+            weights: Some(weights.clone()),
+            device: BackendKind::Flex,
+            fid_min_images: FID_MIN_IMAGES,
+        };
+        let view = |name: &str, mask: Vec<bool>| RenderOnly {
+            name: name.into(),
+            pred: pred.clone(),
+            mask: Some(mask),
+        };
+        let r = evaluate_without_reference(&[view("a", mask.clone())], &opts);
+        use gb_eval::brisque::{Brisque, OPENCV_MODEL_FILE, OPENCV_RANGE_FILE};
+        let model = Brisque::load_opencv(
+            &weights.join(OPENCV_MODEL_FILE),
+            &weights.join(OPENCV_RANGE_FILE),
+        )
+        .unwrap();
+        let crop = bbox_crop(&pred, Some(&mask)).unwrap();
+        assert_eq!((crop.width, crop.height), (160, 120));
+        assert_eq!(crop.get(0, 0), pred.get(x0, y0));
+        assert_eq!(crop.get(159, 119), pred.get(x1 - 1, y1 - 1));
+        let val = |r: &EvalReport, k: &str| match r.values.get(k) {
+            Some(gb_eval::report::Outcome::Value(v)) => *v,
+            other => panic!("{k}: {other:?}"),
+        };
+        assert_eq!(val(&r, "brisque"), model.score(&pred).unwrap());
+        assert_eq!(val(&r, "brisque_bbox"), model.score(&crop).unwrap());
+        // the blurred fill scores worse (higher) in the box than the photo's own crop
+        let sharp = model
+            .score(&bbox_crop(&photo, Some(&mask)).unwrap())
+            .unwrap();
+        assert!(
+            val(&r, "brisque_bbox") > sharp + 10.0,
+            "{} vs {sharp}",
+            val(&r, "brisque_bbox")
+        );
+        for k in ["psnr", "ssim", "lpips", "d_psnr", "fid"] {
+            match r.values.get(k) {
+                Some(gb_eval::report::Outcome::Unavailable(why)) => {
+                    assert!(why.contains("no test view with ground truth"), "{k}: {why}")
+                }
+                other => panic!("{k}: {other:?}"),
+            }
+        }
+        // a 1-pixel mask box is too small to score, and says so with the view's name
+        let r = evaluate_without_reference(&[view("a", mask), view("b", tiny)], &opts);
+        assert!(matches!(
+            r.values.get("brisque"),
+            Some(gb_eval::report::Outcome::Value(_))
+        ));
+        match r.values.get("brisque_bbox") {
+            Some(gb_eval::report::Outcome::Unavailable(why)) => {
+                assert!(why.starts_with("b: the mask box is 1x1"), "{why}")
+            }
+            other => panic!("{other:?}"),
+        }
+        let none = evaluate_without_reference(&[], &opts);
+        assert!(matches!(
+            none.values.get("brisque"),
+            Some(gb_eval::report::Outcome::Unavailable(_))
+        ));
     }
 }

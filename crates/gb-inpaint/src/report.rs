@@ -20,7 +20,7 @@ use gb_nerf::train::data::prepare_view;
 use gb_nerf::train::output::write_render_pngs;
 
 use crate::error::InpaintError;
-use crate::metrics::ViewPair;
+use crate::metrics::{RenderOnly, ViewPair};
 use crate::svg::{escape, LineChart, Series};
 use crate::GuidedTrainer;
 
@@ -343,6 +343,9 @@ pub struct RunPage<'a> {
     pub trainer: &'a GuidedTrainer,
     /// The evaluated test views (renders already in `OUT/renders/`).
     pub pairs: &'a [ViewPair],
+    /// For a scene without test views: its rendered masked training views
+    /// ([`render_masked_train_views`]), shown instead.
+    pub train_views: &'a [TrainViewRender],
     /// Their metrics.
     pub eval: &'a EvalReport,
     /// The run's `metrics.json` (the summary table reads it).
@@ -355,6 +358,48 @@ pub struct RunPage<'a> {
 
 /// Views shown for a scene without test views (the masked training views).
 pub const MAX_TRAIN_VIEWS_SHOWN: usize = 3;
+
+/// A masked training view rendered for a scene without ground truth.
+#[derive(Debug, Clone)]
+pub struct TrainViewRender {
+    /// The view's name in the scene.
+    pub view: String,
+    /// The captured image (object present).
+    pub input: RgbImage,
+    /// The render, named `train_<view>` (its PNGs are `OUT/renders/train_<view>_*.png`).
+    pub render: RenderOnly,
+}
+
+/// Renders the first [`MAX_TRAIN_VIEWS_SHOWN`] masked training views into `OUT/renders/`
+/// (RGB, depth, normals): what a scene without test views shows and is scored on.
+pub fn render_masked_train_views(
+    out: &Path,
+    scene: &Scene,
+    trainer: &GuidedTrainer,
+) -> Result<Vec<TrainViewRender>, InpaintError> {
+    let renders = out.join("renders");
+    let masked = scene
+        .split(Split::Train)
+        .filter(|v| v.mask.as_ref().is_some_and(|m| m.bbox().is_some()))
+        .take(MAX_TRAIN_VIEWS_SHOWN);
+    let mut views = Vec::new();
+    for view in masked {
+        let v = prepare_view(view, trainer.config.train.image_downscale);
+        let r = trainer.render(&v.camera);
+        let stem = format!("train_{}", view.name);
+        write_render_pngs(&renders, &stem, &r).map_err(InpaintError::from)?;
+        views.push(TrainViewRender {
+            view: view.name.clone(),
+            input: v.image,
+            render: RenderOnly {
+                name: stem,
+                pred: r.rgb,
+                mask: v.mask.map(|m| m.data),
+            },
+        });
+    }
+    Ok(views)
+}
 
 fn io_err(path: &Path, e: impl std::fmt::Display) -> InpaintError {
     InpaintError::Io {
@@ -449,33 +494,25 @@ pub fn write_run_report(p: &RunPage) -> Result<PathBuf, InpaintError> {
         notes.push(format!(
             "The scene has no test view with ground truth: the first {MAX_TRAIN_VIEWS_SHOWN} \
              masked training views are shown, with the object present in the input and \
-             removed in our render."
+             removed in our render. They are scored without a reference: BRISQUE (lower is \
+             more natural) of the whole render and of the mask box, which holds the fill."
         ));
         let renders = p.out.join("renders");
-        let masked = p
-            .scene
-            .split(Split::Train)
-            .filter(|v| v.mask.as_ref().is_some_and(|m| m.bbox().is_some()))
-            .take(MAX_TRAIN_VIEWS_SHOWN);
-        for view in masked {
-            let v = prepare_view(view, p.trainer.config.train.image_downscale);
-            let r = p.trainer.render(&v.camera);
-            let stem = format!("train_{}", view.name);
-            write_render_pngs(&renders, &stem, &r).map_err(InpaintError::from)?;
+        for t in p.train_views {
+            let stem = &t.render.name;
             let input = format!("{stem}_input.png");
-            write_png(&dir.join(&input), &v.image)?;
-            let mask = v.mask.as_ref().map(|m| m.data.as_slice());
+            write_png(&dir.join(&input), &t.input)?;
             let mut cells = vec![
                 c("input (object present)", format!("report/{input}")),
                 c("ours", format!("renders/{stem}_rgb.png")),
-                baseline_cell(&stem, &stem, &v.image, mask)?,
+                baseline_cell(stem, stem, &t.input, t.render.mask.as_deref())?,
                 c("ours: depth", format!("renders/{stem}_depth.png")),
             ];
             if renders.join(format!("{stem}_normal.png")).is_file() {
                 cells.push(c("ours: normals", format!("renders/{stem}_normal.png")));
             }
             views.push(ReportView {
-                name: format!("{} (training view)", view.name),
+                name: format!("{} (training view)", t.view),
                 cells,
             });
         }

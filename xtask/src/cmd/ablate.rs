@@ -2,7 +2,8 @@
 //!
 //! ```text
 //! cargo xtask ablate --scene DIR [--methods LIST] [--preset P] [--prior P] [--lora FILE]
-//!     [--steps N] [--out DIR] [--w3 LIST] [--device D] [--weights DIR] [--orbit-frames N]
+//!     [--steps N] [--seed N] [--out DIR] [--w3 LIST] [--device D] [--weights DIR]
+//!     [--orbit-frames N]
 //! ```
 //!
 //! Runs every method of the grid with the same code as `cargo xtask inpaint`
@@ -59,6 +60,9 @@ pub struct Args {
     /// Override the preset's number of training steps.
     #[arg(long)]
     pub steps: Option<usize>,
+    /// Override the preset's training seed in every run.
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// Output folder.
     #[arg(long, default_value = "out/ablate")]
     pub out: PathBuf,
@@ -122,6 +126,7 @@ fn inpaint_args(
         device: args.device,
         resume: false,
         steps: args.steps,
+        seed: args.seed,
         baseline,
         weights: args.weights.clone(),
         orbit_frames: args.orbit_frames,

@@ -4,7 +4,8 @@
 //! ```text
 //! cargo xtask inpaint [--scene DIR] [--method M] [--preset P] [--prior none|tiny|DIR|HUB_ID]
 //!     [--lora FILE] [--prompt P] [--negative-prompt N] [--normal-prompt G] [--device D]
-//!     [--out DIR] [--resume] [--steps N] [--baseline DIR] [--weights DIR] [--orbit-frames N]
+//!     [--out DIR] [--resume] [--steps N] [--seed N] [--baseline DIR] [--weights DIR]
+//!     [--orbit-frames N]
 //! ```
 //!
 //! - `--method`: a built-in method (`configs/methods/`: gb-nerf, gb-nerf-unseen, bsd,
@@ -53,7 +54,7 @@ use anyhow::{bail, Context};
 use gb_core::BackendKind;
 use gb_eval::disparity::{disparity_to_rgb8, ScalarMap};
 use gb_eval::{psnr, ssim, Region};
-use gb_inpaint::metrics::{evaluate, MetricOptions, ViewPair};
+use gb_inpaint::metrics::{evaluate, evaluate_without_reference, MetricOptions, ViewPair};
 use gb_inpaint::pre_inpainted;
 use gb_inpaint::report::RunPage;
 use gb_inpaint::{
@@ -110,6 +111,10 @@ pub struct Args {
     /// Override the preset's number of training steps.
     #[arg(long)]
     pub steps: Option<usize>,
+    /// Override the preset's training seed (`[train] seed`: ray batches, the guidance's
+    /// timesteps and noise); `bench quality --seeds` repeats a grid over seeds with it.
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// Another run's output folder (or its `renders/`): its test-view renders are the
     /// baseline column of `report.html` (default: the masked input, said so on the page).
     #[arg(long)]
@@ -240,6 +245,9 @@ pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
     let mut config = load_preset(&args.preset)?;
     if let Some(steps) = args.steps {
         config.train.steps = steps;
+    }
+    if let Some(seed) = args.seed {
+        config.train.seed = seed;
     }
 
     // the prior and its LoRA: resolved and loaded before anything else runs
@@ -400,9 +408,21 @@ pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
             "evaluations_per_ray": r.evaluations_per_ray,
         }));
     }
+    // a scene without test views: its masked training views, scored without a reference
+    let train_views = if pairs.is_empty() {
+        gb_inpaint::report::render_masked_train_views(&args.out, &scene, &trainer)?
+    } else {
+        Vec::new()
+    };
     let render_seconds = render_start.elapsed().as_secs_f64();
     let eval_start = Instant::now();
-    let eval = evaluate(&pairs, &MetricOptions::new(args.weights.clone(), device));
+    let metric_options = MetricOptions::new(args.weights.clone(), device);
+    let eval = if pairs.is_empty() {
+        let renders: Vec<_> = train_views.iter().map(|t| t.render.clone()).collect();
+        evaluate_without_reference(&renders, &metric_options)
+    } else {
+        evaluate(&pairs, &metric_options)
+    };
     let eval_seconds = eval_start.elapsed().as_secs_f64();
     let orbit = gb_inpaint::gif::write_orbit(&args.out, &scene, &trainer, args.orbit_frames)?;
     let mean = |i: usize| (counts[i] > 0).then(|| sums[i] / counts[i] as f64);
@@ -444,7 +464,10 @@ pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
                   are this run's wall time per step (train_log.jsonl has every step); `eval`: \
                   every gb-eval metric that applies (cargo xtask eval's keys and JSON: _bbox, \
                   _mask regions, lpips = ST-LPIPS, fid / d_fid, brisque, nima), unavailable ones \
-                  null with the reason under eval.unavailable",
+                  null with the reason under eval.unavailable; a scene without test views is \
+                  scored on its first masked training views (renders/train_*) by the \
+                  no-reference metrics only: brisque / nima of the whole render and, as \
+                  brisque_bbox / nima_bbox, of the mask's bounding box (the filled region)",
     });
     let path = args.out.join("metrics.json");
     write_json(&path, &metrics)?;
@@ -453,6 +476,7 @@ pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
         scene: &scene,
         trainer: &trainer,
         pairs: &pairs,
+        train_views: &train_views,
         eval: &eval,
         metrics: &metrics,
         baseline: args.baseline.as_deref(),
