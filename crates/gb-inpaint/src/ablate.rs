@@ -10,7 +10,9 @@
 //! Columns ([`COLUMNS`]): masked-box SSIM, masked-box ST-LPIPS (shown when at least one row
 //! has it; otherwise the reason is printed under the table), masked-box D-PSNR, masked-box
 //! and full-image PSNR, training time. Values come from each run's `metrics.json` `eval`
-//! block (gb-eval keys); an unavailable value is `n/a` with its reason in the JSON.
+//! block (gb-eval keys); an unavailable value is `n/a` with its reason in the JSON. A scene
+//! without ground truth gets the no-reference columns instead ([`NO_REFERENCE_COLUMNS`]:
+//! BRISQUE of the mask box and of the whole render, on the masked training views).
 
 use serde_json::{json, Value};
 
@@ -84,17 +86,27 @@ fn fmt(v: f64) -> String {
     }
 }
 
-/// The columns shown: ST-LPIPS only when a run has it.
+/// The columns of a scene without ground truth (a real capture without test views), whose
+/// runs are scored on their masked training views by the no-reference metric only.
+pub const NO_REFERENCE_COLUMNS: &[(&str, &str, bool)] = &[
+    ("brisque_bbox", "BRISQUE (mask box)", false),
+    ("brisque", "BRISQUE (full)", false),
+];
+
+/// The columns shown: ST-LPIPS only when a run has it; without ground truth (no run has a
+/// PSNR), the no-reference columns instead.
 fn shown_columns(runs: &[&RunOutcome]) -> Vec<(&'static str, &'static str, bool)> {
+    let any_has = |k: &str| {
+        runs.iter()
+            .any(|r| r.result.as_ref().is_ok_and(|m| value(m, k).is_ok()))
+    };
+    if !any_has("psnr") && NO_REFERENCE_COLUMNS.iter().any(|(k, _, _)| any_has(k)) {
+        return NO_REFERENCE_COLUMNS.to_vec();
+    }
     COLUMNS
         .iter()
         .copied()
-        .filter(|(k, _, _)| {
-            *k != "lpips_bbox"
-                || runs
-                    .iter()
-                    .any(|r| r.result.as_ref().is_ok_and(|m| value(m, k).is_ok()))
-        })
+        .filter(|(k, _, _)| *k != "lpips_bbox" || any_has(k))
         .collect()
 }
 
@@ -261,6 +273,17 @@ mod tests {
             "{md}"
         );
         assert_eq!(js["columns"].as_array().unwrap().len(), 5);
+
+        // a scene without ground truth: the no-reference columns
+        let mut real = run("none", 0.5, None);
+        if let Ok(m) = &mut real.result {
+            m["eval"] = json!({"psnr": null, "brisque": 41.5, "brisque_bbox": 55.25,
+                "unavailable": {"psnr": "the scene has no test view with ground truth"}});
+        }
+        let (md, js) = table("Statue", &[("none".to_string(), &real)]);
+        assert!(md.contains("| none | `none` | 55.25 | 41.50 | 4 |"), "{md}");
+        assert_eq!(js["columns"][0]["key"], "brisque_bbox");
+        assert_eq!(js["columns"].as_array().unwrap().len(), 2);
 
         let charts = w3_charts(&[(-1.0, &a), (0.0, &b)]);
         assert_eq!(charts[0].1.series[0].points, vec![(-1.0, 0.5), (0.0, 0.75)]);
