@@ -38,14 +38,11 @@ use serde_json::json;
 use super::finetune::resolve_prior;
 use super::inpaint;
 
-/// Arguments of `cargo xtask ablate`.
-#[derive(clap::Args, Debug)]
-pub struct Args {
-    /// Scene folder (LLFF / SPIn-NeRF or Blender layout, with masks).
-    #[arg(long)]
-    pub scene: PathBuf,
+/// The settings of the method grid, shared by `cargo xtask ablate` and `bench quality`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct GridArgs {
     /// Comma-separated methods (default: the whole grid: none, spin-nerf-sds, mvip-nerf,
-    /// csd, gb-nerf, sds-lora, bsd).
+    /// csd, gb-nerf, gb-nerf-unseen, sds-lora, bsd).
     #[arg(long, value_delimiter = ',')]
     pub methods: Option<Vec<String>>,
     /// Preset name (fast, balanced, paper) or a TOML file, for every run.
@@ -54,12 +51,26 @@ pub struct Args {
     /// The diffusion prior of the guided methods: tiny (default), a folder or a hub id.
     #[arg(long)]
     pub prior: Option<String>,
-    /// LoRA file for the methods with `use_lora = true` (default: the prior's own).
-    #[arg(long)]
-    pub lora: Option<PathBuf>,
     /// Override the preset's number of training steps.
     #[arg(long)]
     pub steps: Option<usize>,
+    /// Compute backend: ndarray, flex or wgpu.
+    #[arg(long)]
+    pub device: Option<BackendKind>,
+}
+
+/// Arguments of `cargo xtask ablate`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Scene folder (LLFF / SPIn-NeRF or Blender layout, with masks).
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// The grid: methods, preset, prior, steps, device.
+    #[command(flatten)]
+    pub grid: GridArgs,
+    /// LoRA file for the methods with `use_lora = true` (default: the prior's own).
+    #[arg(long)]
+    pub lora: Option<PathBuf>,
     /// Override the preset's training seed in every run.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -69,9 +80,6 @@ pub struct Args {
     /// Comma-separated w3 values of the CSD sweep (e.g. `--w3 -1,0,1`; default -1,-0.5,0,0.5,1).
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub w3: Option<Vec<f64>>,
-    /// Compute backend: ndarray, flex or wgpu.
-    #[arg(long)]
-    pub device: Option<BackendKind>,
     /// Folder of metric weights (default `$GB_TEST_DATA/weights` when it exists).
     #[arg(long)]
     pub weights: Option<PathBuf>,
@@ -116,16 +124,16 @@ fn inpaint_args(
     inpaint::Args {
         scene: Some(args.scene.clone()),
         method: Some(method.to_string()),
-        preset: args.preset.clone(),
-        prior: Some(args.prior.clone().unwrap_or_else(|| "tiny".into())),
+        preset: args.grid.preset.clone(),
+        prior: Some(args.grid.prior.clone().unwrap_or_else(|| "tiny".into())),
         lora: None,
         prompt: None,
         negative_prompt: None,
         normal_prompt: None,
         out,
-        device: args.device,
+        device: args.grid.device,
         resume: false,
-        steps: args.steps,
+        steps: args.grid.steps,
         seed: args.seed,
         baseline,
         weights: args.weights.clone(),
@@ -141,7 +149,7 @@ fn check(args: &Args, methods: &[MethodConfig]) -> anyhow::Result<()> {
             continue;
         }
         if prior_dir.is_none() {
-            let spec = args.prior.as_deref().unwrap_or("tiny");
+            let spec = args.grid.prior.as_deref().unwrap_or("tiny");
             prior_dir = Some(
                 resolve_prior(spec).with_context(|| format!("method {} needs a prior", m.name))?,
             );
@@ -207,7 +215,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !args.scene.is_dir() {
         bail!("--scene {}: not a folder", args.scene.display());
     }
-    let methods = grid(args.methods.as_deref());
+    let methods = grid(args.grid.methods.as_deref());
     if methods.is_empty() {
         bail!("--methods: empty list");
     }

@@ -18,7 +18,6 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use gb_core::BackendKind;
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
 use serde_json::{json, Value};
 
@@ -28,24 +27,13 @@ pub struct Args {
     /// Comma-separated procedural scenes (stairs, fence).
     #[arg(long, value_delimiter = ',', default_value = "stairs,fence")]
     pub scenes: Vec<SceneName>,
-    /// Comma-separated methods (default: the whole grid without the w3 sweep).
-    #[arg(long, value_delimiter = ',')]
-    pub methods: Option<Vec<String>>,
-    /// Preset for every run.
-    #[arg(long, default_value = "fast")]
-    pub preset: String,
-    /// The prior of the guided methods (default: tiny).
-    #[arg(long)]
-    pub prior: Option<String>,
-    /// Override the preset's number of steps.
-    #[arg(long)]
-    pub steps: Option<usize>,
+    /// The grid: methods (default: the whole grid, without the w3 sweep), preset, prior,
+    /// steps, device.
+    #[command(flatten)]
+    pub grid: super::ablate::GridArgs,
     /// Comma-separated training seeds; the tables are their mean (default: the preset's seed).
     #[arg(long, value_delimiter = ',')]
     pub seeds: Option<Vec<u64>>,
-    /// Compute backend.
-    #[arg(long)]
-    pub device: Option<BackendKind>,
     /// Folder of the runs.
     #[arg(long, default_value = "out/bench-quality")]
     pub work: PathBuf,
@@ -191,15 +179,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             };
             let outcome = super::ablate::run(super::ablate::Args {
                 scene: scene_dir.clone(),
-                methods: args.methods.clone(),
-                preset: args.preset.clone(),
-                prior: args.prior.clone(),
+                grid: args.grid.clone(),
                 lora: None,
-                steps: args.steps,
                 seed: *seed,
                 out: runs.clone(),
                 w3: Some(Vec::new()),
-                device: args.device,
                 weights: None,
                 orbit_frames: 0,
             });
@@ -227,9 +211,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "benchmark": "quality",
             "machine": super::bench::machine_description(),
             "scene": format!("{name} (procedural, seed 0, {}x{})", opts.width, opts.height),
-            "preset": args.preset,
-            "prior": args.prior.clone().unwrap_or_else(|| "tiny".into()),
-            "device": args.device.unwrap_or_default().name(),
+            "preset": args.grid.preset,
+            "prior": args.grid.prior.clone().unwrap_or_else(|| "tiny".into()),
+            "device": args.grid.device.unwrap_or_default().name(),
             "training_seeds": seeds,
             "wall_seconds": started.elapsed().as_secs_f64(),
             "baselines": baselines,
