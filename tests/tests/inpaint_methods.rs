@@ -428,3 +428,37 @@ fn a_real_scene_without_test_views_is_scored_without_a_reference() {
     }
     assert!(page.contains("BRISQUE"), "the metric table has no BRISQUE");
 }
+
+#[test]
+fn seed_overrides_the_presets_training_seed_and_reproduces_a_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, preset) = setup(dir.path());
+    let run = |name: &str, seed: &str| {
+        let out = dir.path().join(name);
+        let extra = [
+            "--method",
+            "none",
+            "--steps",
+            "3",
+            "--seed",
+            seed,
+            "--orbit-frames",
+            "0",
+        ];
+        check(&inpaint(&scene, &preset, &out, &extra), name);
+        let cfg = std::fs::read_to_string(out.join("config.toml")).unwrap();
+        assert!(
+            cfg.lines().any(|l| l.trim() == format!("seed = {seed}")),
+            "{name}: config.toml does not record seed {seed}:\n{cfg}"
+        );
+        let losses: Vec<f64> = log_lines(&out)
+            .iter()
+            .map(|l| l["loss"].as_f64().unwrap())
+            .collect();
+        assert_eq!(losses.len(), 3, "{name}");
+        losses
+    };
+    let (a, again, other) = (run("a", "7"), run("a-again", "7"), run("b", "8"));
+    assert_eq!(a, again, "the same seed must reproduce the run");
+    assert_ne!(a, other, "another seed must draw other ray batches");
+}
