@@ -51,18 +51,6 @@ fn metrics(out: &Path) -> serde_json::Value {
 /// Runs `method` for 3 steps and checks the outputs; `terms` are the expected guidance terms
 /// of every step: (modality, U-Net batch).
 fn runs(method: &str, extra: &[&str], terms: &[(&str, u64)], prepare: impl Fn(&Path)) {
-    let guided = if terms.is_empty() { 0 } else { 3 };
-    runs_guiding(method, extra, terms, guided, prepare);
-}
-
-/// [`runs`] where only the last `guided` of the 3 steps carry the guidance terms.
-fn runs_guiding(
-    method: &str,
-    extra: &[&str],
-    terms: &[(&str, u64)],
-    guided: u64,
-    prepare: impl Fn(&Path),
-) {
     let dir = tempfile::tempdir().unwrap();
     let (scene, preset) = setup(dir.path());
     prepare(&scene);
@@ -76,6 +64,7 @@ fn runs_guiding(
     assert_eq!(m["method"], method);
     assert_eq!(m["steps"], 3);
     let g = &m["guidance"];
+    let guided = if terms.is_empty() { 0 } else { 3 };
     assert_eq!(g["guided_steps"], guided, "{g}");
     assert_eq!(g["unguided_steps"], 3 - guided, "{g}");
     assert_eq!(g["unet_calls"], guided * terms.len() as u64, "{g}");
@@ -103,11 +92,7 @@ fn runs_guiding(
                 )
             })
             .collect();
-        let want: Vec<(String, u64)> = if (i as u64) < 3 - guided {
-            Vec::new()
-        } else {
-            terms.iter().map(|(m, b)| (m.to_string(), *b)).collect()
-        };
+        let want: Vec<(String, u64)> = terms.iter().map(|(m, b)| (m.to_string(), *b)).collect();
         assert_eq!(got, want, "step {i} of {method}");
     }
 
@@ -133,11 +118,10 @@ fn gb_nerf_runs_with_bsd_on_rgb_and_normals_and_the_lora() {
 #[test]
 fn gb_nerf_unseen_runs_with_visibility_aware_guidance() {
     // 3 steps: the maps start at step 2000 * 3 / 10000 = 0, so every step is guided
-    runs_guiding(
+    runs(
         "gb-nerf-unseen",
         &["--prior", PRIOR, "--lora", LORA],
         &[("rgb", 2), ("normal", 2)],
-        3,
         |_| {},
     );
 }

@@ -203,10 +203,8 @@ fn per_region(
     }
 }
 
-/// Evaluates the views (see the module docs). Never fails: every problem becomes an
-/// unavailable metric with its reason.
-pub fn evaluate(views: &[ViewPair], opts: &MetricOptions) -> EvalReport {
-    let names: Vec<String> = views.iter().map(|v| v.name.clone()).collect();
+/// An empty report of the named views, with the device and weights folder as context.
+fn new_report(names: Vec<String>, opts: &MetricOptions) -> EvalReport {
     let mut report = EvalReport::new(&names);
     report
         .context
@@ -216,10 +214,22 @@ pub fn evaluate(views: &[ViewPair], opts: &MetricOptions) -> EvalReport {
             .context
             .insert("weights".into(), w.display().to_string());
     }
+    report
+}
+
+/// Marks every full-reference metric unavailable: the scene has no ground truth.
+fn set_no_ground_truth(report: &mut EvalReport) {
+    for key in ["psnr", "ssim", "lpips", "d_psnr", "fid", "d_fid"] {
+        report.set_unavailable(key, "the scene has no test view with ground truth");
+    }
+}
+
+/// Evaluates the views (see the module docs). Never fails: every problem becomes an
+/// unavailable metric with its reason.
+pub fn evaluate(views: &[ViewPair], opts: &MetricOptions) -> EvalReport {
+    let mut report = new_report(views.iter().map(|v| v.name.clone()).collect(), opts);
     if views.is_empty() {
-        for key in ["psnr", "ssim", "lpips", "d_psnr", "fid", "d_fid"] {
-            report.set_unavailable(key, "the scene has no test view with ground truth");
-        }
+        set_no_ground_truth(&mut report);
         return report;
     }
     let e = |r: Result<f64, MetricError>| r.map_err(|e| e.to_string());
@@ -289,23 +299,12 @@ pub fn evaluate(views: &[ViewPair], opts: &MetricOptions) -> EvalReport {
 /// whole render and `_bbox` over the mask box; the full-reference metrics are unavailable.
 /// Never fails, like [`evaluate`].
 pub fn evaluate_without_reference(views: &[RenderOnly], opts: &MetricOptions) -> EvalReport {
-    let names: Vec<String> = views.iter().map(|v| v.name.clone()).collect();
-    let mut report = EvalReport::new(&names);
-    report
-        .context
-        .insert("device".into(), opts.device.name().to_string());
+    let mut report = new_report(views.iter().map(|v| v.name.clone()).collect(), opts);
     report.context.insert(
         "views".into(),
         "masked training views (the scene has no test view with ground truth)".into(),
     );
-    if let Some(w) = &opts.weights {
-        report
-            .context
-            .insert("weights".into(), w.display().to_string());
-    }
-    for key in ["psnr", "ssim", "lpips", "d_psnr", "fid", "d_fid"] {
-        report.set_unavailable(key, "the scene has no test view with ground truth");
-    }
+    set_no_ground_truth(&mut report);
     let scored: Vec<Scored> = views
         .iter()
         .map(|v| (v.name.as_str(), &v.pred, v.mask.as_deref()))

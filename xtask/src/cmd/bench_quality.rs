@@ -273,13 +273,19 @@ mod tests {
         })
     }
 
-    #[test]
-    fn mean_table_averages_each_cell_over_seeds_with_its_spread() {
-        let tables = [
+    /// Three seeds' tables: GB-NeRF beats none on SSIM on two, on ST-LPIPS on one of the two
+    /// that have it.
+    fn three_seeds() -> [Value; 3] {
+        [
             seed_table(0.50, 0.52, Some(0.25)),
             seed_table(0.54, 0.60, None),
             seed_table(0.52, 0.50, Some(0.17)),
-        ];
+        ]
+    }
+
+    #[test]
+    fn mean_table_averages_each_cell_over_seeds_with_its_spread() {
+        let tables = three_seeds();
         let m = mean_table(&tables);
         assert_eq!(m["title"], json!("Baselines (mean of 3 seed(s))"));
         let gb = &m["rows"][1];
@@ -313,11 +319,7 @@ mod tests {
 
     #[test]
     fn wins_vs_none_counts_the_seeds_each_method_beats_its_own_none() {
-        let tables = [
-            seed_table(0.50, 0.52, Some(0.25)),
-            seed_table(0.54, 0.60, None),
-            seed_table(0.52, 0.50, Some(0.15)),
-        ];
+        let tables = three_seeds();
         let w = wins_vs_none(&tables);
         assert_eq!(w["GB-NeRF"]["ssim_bbox"], json!({"wins": 2, "of": 3}));
         assert_eq!(w["GB-NeRF"]["lpips_bbox"], json!({"wins": 1, "of": 2}));
