@@ -8,7 +8,9 @@ seeds, their mean), and scores masked PSNR against the ground truth for:
   - each run folder's test render (e.g. `none`, `gb-nerf`), cropped the same way;
   - a mean-colour fill.
 If the prior's fill scores below the `none` run, distilling it can only pull the NeRF away
-from what the other views already show. Each score is also split into the mask pixels that
+from what the other views already show. With `--condition-on RUN`, the prior also inpaints
+only the unobserved pixels, seeing RUN's render on the observed ones (the visibility-aware
+conditioning of `condition_on_observed`), keys `prior_unseen_mask_*`. Each score is also split into the mask pixels that
 some training view observes and those none does (`hidden_region_visibility.py`), suffixes
 `_observed` and `_unobserved`.
 
@@ -55,6 +57,8 @@ def main():
     ap.add_argument("--work", default="/tmp/prior-fill")
     ap.add_argument("--out", required=True)
     ap.add_argument("--reuse", action="store_true", help="keep samples already in --work")
+    ap.add_argument("--condition-on", default="",
+                    help="run whose render fills the observed pixels for an unobserved-only fill")
     a = ap.parse_args()
     sc = Scene(a.scene)
     os.makedirs(a.work, exist_ok=True)
@@ -99,18 +103,21 @@ def main():
                     out[key + suffix] = float(-10 * np.log10(np.mean((x[m] - gtc[m]) ** 2)))
             return out
 
-        samples = []
-        for seed in range(a.samples):
-            out = os.path.join(a.work, f"{name}_s{seed}.png")
-            if a.reuse and os.path.exists(out):
+        def inpaint(image_path, hole_path, tag):
+            samples = []
+            for seed in range(a.samples):
+                out = os.path.join(a.work, f"{name}{tag}_s{seed}.png")
+                if not (a.reuse and os.path.exists(out)):
+                    subprocess.run([a.xtask, "inpaint-image", "--prior", a.prior,
+                                    "--image", image_path, "--mask", hole_path,
+                                    "--prompt", a.prompt, "--negative-prompt", a.negative_prompt,
+                                    "--steps", str(a.steps), "--seed", str(seed),
+                                    "--blend-known", "--out", out],
+                                   check=True, capture_output=True)
                 samples.append(load(out))
-                continue
-            subprocess.run([a.xtask, "inpaint-image", "--prior", a.prior, "--image", gt_path,
-                            "--mask", mask_path, "--prompt", a.prompt,
-                            "--negative-prompt", a.negative_prompt, "--steps", str(a.steps),
-                            "--seed", str(seed), "--blend-known", "--out", out],
-                           check=True, capture_output=True)
-            samples.append(load(out))
+            return samples
+
+        samples = inpaint(gt_path, mask_path, "")
         fill = gtc.copy()
         fill[mc] = gtc[~mc].mean(0)
         row = {"mask_fraction": float(mc.mean()), "observed_fraction": float(seen.sum() / mc.sum())}
@@ -119,6 +126,17 @@ def main():
         row.update(scores("mean_colour_fill", fill))
         for m in methods:
             row.update(scores(m, crop(load(os.path.join(a.runs, m, "renders", name + "_rgb.png")))))
+        if a.condition_on:
+            run = crop(load(os.path.join(a.runs, a.condition_on, "renders", name + "_rgb.png")))
+            known = np.where(mc[..., None], run, gtc)
+            hole = mc & ~seen
+            known_path = os.path.join(a.work, name + "_known.png")
+            hole_path = os.path.join(a.work, name + "_unobserved.png")
+            Image.fromarray((np.clip(known, 0, 1) * 255).round().astype(np.uint8)).save(known_path)
+            Image.fromarray((hole * 255).astype(np.uint8)).save(hole_path)
+            cond = inpaint(known_path, hole_path, "_unseen")
+            row.update(scores("prior_unseen_mask_one_sample", cond[0]))
+            row.update(scores(f"prior_unseen_mask_mean_of_{a.samples}", np.mean(cond, 0)))
         rows[name] = row
         print(name, {k: round(v, 2) for k, v in row.items()}, flush=True)
     keys = sorted({k for r in rows.values() for k in r})
@@ -127,6 +145,7 @@ def main():
     doc = {"diagnosis": "masked PSNR (dB) in the guidance crop of each test view",
            "scene": a.scene, "prior": a.prior, "resolution": a.resolution,
            "ddim_steps": a.steps, "samples": a.samples, "blend_known": True,
+           "condition_on": a.condition_on or None,
            "prompt": a.prompt, "negative_prompt": a.negative_prompt,
            "mean": mean, "per_view": rows}
     with open(a.out + ".tmp", "w") as f:

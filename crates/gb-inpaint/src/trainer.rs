@@ -51,8 +51,8 @@ use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
 use crate::crop::{
-    has_guidance_crop, masked_image_latents, render_normal_input, render_rgb_input, RenderContext,
-    ViewGuidance,
+    has_guidance_crop, latent_mask, masked_image_latents, paste_inside, render_normal_input,
+    render_rgb_input, RenderContext, ViewGuidance,
 };
 use crate::error::InpaintError;
 use crate::guidance::{distiller_for, guidance_term, Modality, TermConditioning, TermOutput};
@@ -509,6 +509,22 @@ impl GuidedTrainer {
             .map(|map| map.weights(r, weight, &device))
     }
 
+    /// The prior's inpainting mask `[1, 1, R, R]` of `view` under visibility-aware
+    /// conditioning (`visibility.condition_on_observed`): the crop's mask less the pixels
+    /// that other training views observe. `None` when that conditioning is off or before
+    /// the maps start (the crop's own mask applies).
+    fn conditioning_mask(&mut self, view: usize) -> Option<Tensor<4>> {
+        let vis = &self.method.visibility;
+        if !(vis.enabled() && vis.condition_on_observed) || self.nerf.step < self.visibility_start()
+        {
+            return None;
+        }
+        let mask = self.cached(view).ok()?.mask.clone();
+        let r = mask.dims()[2];
+        let unobserved = self.observed_map(view)?.weights(r, 0.0, &mask.device());
+        Some(mask * unobserved)
+    }
+
     /// `image` with the gradient on observed pixels scaled (identity when off).
     fn gate_observed(&mut self, view: usize, image: Tensor<4>) -> Tensor<4> {
         let r = image.dims()[2];
@@ -541,6 +557,7 @@ impl GuidedTrainer {
         let seed = derive_seed(self.nerf.config.train.seed, step, modality.salt());
         let k = self.method.guide_every;
         let normal_start = self.normal_start();
+        let unobserved_mask = self.conditioning_mask(view);
         let (lambda, chain) = match modality {
             Modality::Rgb => (self.method.lambda_rgb, self.method.reference_chain_rule),
             Modality::Normal => (self.method.lambda_normal, self.method.reference_chain_rule),
@@ -565,20 +582,31 @@ impl GuidedTrainer {
             }
         };
         let mut distiller = distiller_for(settings, &g.prior, seed, iteration)?;
-        let normal_latents;
-        let masked_latents = match modality {
-            Modality::Rgb => &vg.masked_image_latents,
-            Modality::Normal => {
-                // no ground-truth normal map: the conditioning is the current normal map
-                // itself (detached), masked, as in the reference
+        let encoder = g.prior.encoder.as_ref();
+        let (mask_latent, masked_latents) = match (unobserved_mask, modality) {
+            // visibility-aware conditioning: the prior is told that only the unobserved
+            // pixels are unknown, and sees the current render (detached) on the others
+            (Some(mask), _) => {
                 let current = image.clone().detach().inner();
-                normal_latents = masked_image_latents(g.prior.encoder.as_ref(), current, &vg.mask)?;
-                &normal_latents
+                let known = match modality {
+                    Modality::Rgb => paste_inside(&vg.ground_truth, current, &vg.mask),
+                    Modality::Normal => current,
+                };
+                let latent = latent_mask(mask.clone(), encoder.downsample_factor());
+                (latent, masked_image_latents(encoder, known, &mask)?)
+            }
+            (None, Modality::Rgb) => (vg.mask_latent.clone(), vg.masked_image_latents.clone()),
+            // no ground-truth normal map: the conditioning is the current normal map
+            // itself (detached), masked, as in the reference
+            (None, Modality::Normal) => {
+                let current = image.clone().detach().inner();
+                let latents = masked_image_latents(encoder, current, &vg.mask)?;
+                (vg.mask_latent.clone(), latents)
             }
         };
         let cond = TermConditioning {
-            mask_latent: &vg.mask_latent,
-            masked_image_latents: masked_latents,
+            mask_latent: &mask_latent,
+            masked_image_latents: &masked_latents,
             prompts,
         };
         guidance_term(&mut distiller, &g.prior, image, &cond, lambda, chain, at)

@@ -3,7 +3,9 @@
 //!
 //! - after a short reconstruction, the observed map of each masked view agrees with the
 //!   map computed from the scene's ground-truth depths (same test, exact geometry);
-//! - when every other view masks everything, nothing is observed.
+//! - when every other view masks everything, nothing is observed;
+//! - with `condition_on_observed`, the prior's mask (and so its gradient) shrinks to the
+//!   unobserved pixels, and what the prior sees there changes.
 //!
 //! (That the gate scales the gradient per pixel and keeps the value is a unit test of
 //! `gb_inpaint::visibility`.)
@@ -11,8 +13,10 @@
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
+use burn::tensor::{Tensor, TensorData};
 use gb_core::BackendKind;
-use gb_inpaint::crop::CropGeometry;
+use gb_inpaint::crop::{latent_mask, CropGeometry};
+use gb_inpaint::guidance::Modality;
 use gb_inpaint::visibility::VisibilityConfig;
 use gb_inpaint::{GuidancePrior, GuidedTrainer, MethodConfig, PromptOverrides, SceneCaptions};
 use gb_nerf::render::rays::{all_pixels, camera_rays};
@@ -215,4 +219,85 @@ fn nothing_is_observed_when_every_other_view_masks_everything() {
     let map = t.observed_map(v).unwrap();
     assert!(map.masked > 0);
     assert_eq!(map.observed_share(), 0.0);
+}
+
+#[test]
+fn conditioning_on_observed_pixels_leaves_only_unobserved_ones_to_the_prior() {
+    let _guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scene(dir.path());
+    let mut t = trainer(&scene, dir.path(), 150, 0.0);
+    let views = t.guidance.as_ref().unwrap().views.clone();
+    // a view whose crop has both observed and unobserved masked pixels
+    let view = views
+        .into_iter()
+        .find(|&v| {
+            let share = t.observed_map(v).unwrap().observed_share();
+            share > 0.1 && share < 0.9
+        })
+        .expect("a view with a partly observed hole");
+    let r = t.guidance.as_ref().unwrap().prior.info.resolution;
+    let dims = r / 4;
+    let noise: Vec<f32> = (0..4 * dims * dims)
+        .map(|i| ((i * 7919) % 1000) as f32 / 500.0 - 1.0)
+        .collect();
+    let latent_gradient = |t: &mut GuidedTrainer| -> Vec<f32> {
+        let (image, _) = t.rgb_prior_input(view).unwrap();
+        let n = Tensor::<4>::from_data(
+            TensorData::new(noise.clone(), [1, 4, dims, dims]),
+            &KIND.device(),
+        );
+        let out = t
+            .term(Modality::Rgb, view, image, 0, Some((400, n)))
+            .unwrap();
+        out.gradient.into_data().try_to_vec::<f32>().unwrap()
+    };
+    let plain = latent_gradient(&mut t);
+    t.method.visibility.condition_on_observed = true;
+    let conditioned = latent_gradient(&mut t);
+
+    // the expected latent masks: the crop's mask, and the crop's mask less observed pixels
+    let device = KIND.device();
+    let crop_mask = CropGeometry::new(&t.data.views[view], 0.25, r)
+        .unwrap()
+        .mask_tensor(&device);
+    let unobserved = t.observed_map(view).unwrap().weights(r, 0.0, &device);
+    let flags = |m: Tensor<4>| -> Vec<bool> {
+        let v = latent_mask(m, 4).into_data().try_to_vec::<f32>().unwrap();
+        v.iter().map(|x| *x > 0.5).collect()
+    };
+    let whole = flags(crop_mask.clone());
+    let hidden = flags(crop_mask * unobserved);
+    let per_pixel =
+        |g: &[f32], p: usize| -> f32 { (0..4).map(|c| g[c * dims * dims + p].abs()).sum() };
+    let (mut shrunk, mut changed) = (0usize, 0usize);
+    for p in 0..dims * dims {
+        if !hidden[p] {
+            assert_eq!(
+                per_pixel(&conditioned, p),
+                0.0,
+                "latent pixel {p} is observed"
+            );
+        }
+        if whole[p] && !hidden[p] && per_pixel(&plain, p) > 0.0 {
+            shrunk += 1;
+        }
+        if hidden[p] {
+            let d: f32 = (0..4)
+                .map(|c| (conditioned[c * dims * dims + p] - plain[c * dims * dims + p]).abs())
+                .sum();
+            changed += usize::from(d > 1e-6);
+        }
+    }
+    let n_hidden = hidden.iter().filter(|h| **h).count();
+    eprintln!(
+        "latent pixels: mask {}, unobserved {n_hidden}, shrunk {shrunk}, changed {changed}",
+        whole.iter().filter(|h| **h).count()
+    );
+    assert!(n_hidden > 0 && hidden.iter().zip(&whole).all(|(h, w)| !h || *w));
+    assert!(shrunk > 0, "the prior's mask lost no observed pixel");
+    assert!(
+        changed * 2 > n_hidden,
+        "the conditioning changed the prior's answer on {changed} of {n_hidden} pixels"
+    );
 }
