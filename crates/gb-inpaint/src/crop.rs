@@ -193,14 +193,6 @@ pub fn masked_image_latents(
     Ok(encoder.encode(masked)?.inner())
 }
 
-/// `inside * mask + outside * (1 - mask)` for `[1, 3, R, R]` images and a `[1, 1, R, R]`
-/// mask (all on one device, no graph).
-pub fn paste_inside(outside: &Tensor<4>, inside: Tensor<4>, mask: &Tensor<4>) -> Tensor<4> {
-    let m = mask.clone().repeat_dim(1, 3);
-    let keep = m.ones_like() - m.clone();
-    inside * m + outside.clone() * keep
-}
-
 /// What rendering needs from the trainer.
 #[derive(Clone, Copy)]
 pub struct RenderContext<'a> {

@@ -40,7 +40,10 @@ use std::time::Instant;
 
 use burn::tensor::Tensor;
 use gb_core::BackendKind;
-use gb_diffusion::distill::{DistillSettings, PromptCache, PromptEmbeddings, StepDiagnostics};
+use gb_diffusion::distill::prior_input::compose;
+use gb_diffusion::distill::{
+    DistillSettings, PriorInputMode, PromptCache, PromptEmbeddings, StepDiagnostics,
+};
 use gb_nerf::scene::Scene;
 use gb_nerf::train::data::TrainData;
 use gb_nerf::train::losses::psnr_from_mse;
@@ -51,8 +54,8 @@ use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
 use crate::crop::{
-    has_guidance_crop, latent_mask, masked_image_latents, paste_inside, render_normal_input,
-    render_rgb_input, RenderContext, ViewGuidance,
+    has_guidance_crop, latent_mask, masked_image_latents, render_normal_input, render_rgb_input,
+    RenderContext, ViewGuidance,
 };
 use crate::error::InpaintError;
 use crate::guidance::{distiller_for, guidance_term, Modality, TermConditioning, TermOutput};
@@ -589,7 +592,13 @@ impl GuidedTrainer {
             (Some(mask), _) => {
                 let current = image.clone().detach().inner();
                 let known = match modality {
-                    Modality::Rgb => paste_inside(&vg.ground_truth, current, &vg.mask),
+                    Modality::Rgb => compose(
+                        current,
+                        Some(&vg.ground_truth),
+                        &vg.mask,
+                        PriorInputMode::PasteOnGroundTruth,
+                        view,
+                    )?,
                     Modality::Normal => current,
                 };
                 let latent = latent_mask(mask.clone(), encoder.downsample_factor());

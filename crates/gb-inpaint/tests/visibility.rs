@@ -11,7 +11,7 @@
 //! `gb_inpaint::visibility`.)
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::{Mutex, MutexGuard};
 
 use burn::tensor::{Tensor, TensorData};
 use gb_core::BackendKind;
@@ -73,6 +73,16 @@ fn trainer(scene: &Scene, dir: &Path, steps: usize, observed_weight: f64) -> Gui
         gb_nerf::train::Trainer::train_step(&mut t);
     }
     t
+}
+
+/// The test lock, the scene's folder and a visibility-aware trainer (observed weight 0) after
+/// `steps` reconstruction steps on the generated scene.
+fn setup(steps: usize) -> (MutexGuard<'static, ()>, tempfile::TempDir, GuidedTrainer) {
+    let guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scene(dir.path());
+    let t = trainer(&scene, dir.path(), steps, 0.0);
+    (guard, dir, t)
 }
 
 /// The z-depths of the training views (in the trainer's order) rendered without the object:
@@ -168,10 +178,7 @@ fn ground_truth_map(
 
 #[test]
 fn observed_maps_agree_with_ground_truth_visibility() {
-    let _guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
-    let dir = tempfile::tempdir().unwrap();
-    let scene = scene(dir.path());
-    let mut t = trainer(&scene, dir.path(), 300, 0.0);
+    let (_guard, _dir, mut t) = setup(300);
     let views: Vec<usize> = (0..t.data.views.len())
         .filter(|&v| t.data.views[v].mask.is_some())
         .collect();
@@ -199,10 +206,7 @@ fn observed_maps_agree_with_ground_truth_visibility() {
 
 #[test]
 fn nothing_is_observed_when_every_other_view_masks_everything() {
-    let _guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
-    let dir = tempfile::tempdir().unwrap();
-    let scene = scene(dir.path());
-    let mut t = trainer(&scene, dir.path(), 20, 0.0);
+    let (_guard, _dir, mut t) = setup(20);
     let v = (0..t.data.views.len())
         .find(|&v| t.data.views[v].mask.is_some())
         .unwrap();
@@ -223,10 +227,7 @@ fn nothing_is_observed_when_every_other_view_masks_everything() {
 
 #[test]
 fn conditioning_on_observed_pixels_leaves_only_unobserved_ones_to_the_prior() {
-    let _guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
-    let dir = tempfile::tempdir().unwrap();
-    let scene = scene(dir.path());
-    let mut t = trainer(&scene, dir.path(), 150, 0.0);
+    let (_guard, _dir, mut t) = setup(150);
     let views = t.guidance.as_ref().unwrap().views.clone();
     // a view whose crop has both observed and unobserved masked pixels
     let view = views
