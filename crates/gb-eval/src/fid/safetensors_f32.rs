@@ -1,6 +1,5 @@
-//! A minimal reader for f32 tensors in a safetensors file (8-byte little-endian header size,
-//! JSON header, raw little-endian data), so that loading names the file and the tensor in
-//! every error.
+//! f32 tensors of a safetensors file (read with the `safetensors` crate), indexed so that
+//! loading names the file and the tensor in every error.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -24,63 +23,21 @@ impl F32Tensors {
         Self::parse(&bytes, path)
     }
 
-    /// Indexes safetensors bytes; `path` only names the file in errors.
+    /// Indexes safetensors bytes (parsed by the `safetensors` crate, which checks the
+    /// header, the offsets and the dtype sizes); `path` only names the file in errors.
     pub fn parse(bytes: &[u8], path: &Path) -> Result<Self, FidError> {
-        let format = |message: String| FidError::Format {
+        let parsed = safetensors::SafeTensors::deserialize(bytes).map_err(|e| FidError::Format {
             path: path.to_path_buf(),
-            message,
-        };
-        if bytes.len() < 8 {
-            return Err(format("shorter than the 8-byte header size".into()));
-        }
-        let n = u64::from_le_bytes(bytes[..8].try_into().unwrap_or([0; 8])) as usize;
-        let header = bytes
-            .get(8..8 + n)
-            .ok_or_else(|| format(format!("header of {n} bytes runs past the end")))?;
-        let data = &bytes[8 + n..];
-        let json: serde_json::Value = serde_json::from_slice(header)
-            .map_err(|e| format(format!("header is not JSON: {e}")))?;
-        let obj = json
-            .as_object()
-            .ok_or_else(|| format("header is not a JSON object".into()))?;
-        let mut tensors = HashMap::new();
-        for (name, info) in obj {
-            if name == "__metadata__" {
-                continue;
-            }
-            let dtype = info
-                .get("dtype")
-                .and_then(|d| d.as_str())
-                .unwrap_or("?")
-                .to_string();
-            let shape: Vec<usize> = info
-                .get("shape")
-                .and_then(|s| s.as_array())
-                .map(|a| {
-                    a.iter()
-                        .filter_map(|v| v.as_u64().map(|v| v as usize))
-                        .collect()
-                })
-                .ok_or_else(|| format(format!("tensor '{name}' has no shape")))?;
-            let offsets: Vec<usize> = info
-                .get("data_offsets")
-                .and_then(|s| s.as_array())
-                .map(|a| {
-                    a.iter()
-                        .filter_map(|v| v.as_u64().map(|v| v as usize))
-                        .collect()
-                })
-                .ok_or_else(|| format(format!("tensor '{name}' has no data_offsets")))?;
-            if offsets.len() != 2 || offsets[0] > offsets[1] || offsets[1] > data.len() {
-                return Err(format(format!(
-                    "tensor '{name}' has bad data_offsets {offsets:?}"
-                )));
-            }
-            tensors.insert(
-                name.clone(),
-                (shape, dtype, data[offsets[0]..offsets[1]].to_vec()),
-            );
-        }
+            message: e.to_string(),
+        })?;
+        let tensors = parsed
+            .tensors()
+            .into_iter()
+            .map(|(name, view)| {
+                let dtype = format!("{:?}", view.dtype());
+                (name, (view.shape().to_vec(), dtype, view.data().to_vec()))
+            })
+            .collect();
         Ok(Self {
             path: path.to_path_buf(),
             tensors,
