@@ -33,6 +33,7 @@
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
+use gb_core::{f32_values, TensorValuesError};
 use gb_nerf::field::NerfField;
 use gb_nerf::render::rays::{all_pixels, camera_rays};
 use gb_nerf::render::render_rays;
@@ -145,7 +146,8 @@ pub struct ObservedMap {
 
 impl ObservedMap {
     /// The map of training view `index` (crop `margin`, module docs) from the field of
-    /// `ctx` at `step`; `None` when the view has no guidance crop.
+    /// `ctx` at `step`; `None` when the view has no guidance crop. Errors when a rendered
+    /// depth does not hold `f32` values (never a silently misaligned map).
     pub fn compute(
         ctx: &RenderContext<'_>,
         views: &[TrainView],
@@ -153,15 +155,20 @@ impl ObservedMap {
         margin: f32,
         cfg: &VisibilityConfig,
         step: usize,
-    ) -> Option<Self> {
+    ) -> Result<Option<Self>, TensorValuesError> {
         let rv = cfg.resolution.max(1);
-        let geometry = CropGeometry::new(views.get(index)?, margin, rv)?;
+        let Some(geometry) = views
+            .get(index)
+            .and_then(|view| CropGeometry::new(view, margin, rv))
+        else {
+            return Ok(None);
+        };
         let camera = geometry.camera(rv);
         let grid = all_pixels(rv, rv);
         let pixels: Vec<[f32; 2]> = geometry.masked.iter().map(|&i| grid[i]).collect();
         let field = ctx.field.valid();
         let rays = camera_rays(&camera, &pixels, ctx.space, ctx.near, ctx.far);
-        let depth = render_depth(&field, ctx, &rays);
+        let depth = render_depth(&field, ctx, &rays)?;
         let points: Vec<[f32; 3]> = (0..pixels.len())
             .map(|k| {
                 let (o, d) = (rays.origins[k], rays.dirs[k]);
@@ -199,7 +206,7 @@ impl ObservedMap {
                 expected.push(z);
             }
             let r = camera_rays(cam, &px_list, ctx.space, ctx.near, ctx.far);
-            seen.extend(render_depth(&field, ctx, &r));
+            seen.extend(render_depth(&field, ctx, &r)?);
         }
         let mut hit = vec![false; pixels.len()];
         for ((k, z), d) in owner.iter().zip(&expected).zip(&seen) {
@@ -211,12 +218,12 @@ impl ObservedMap {
         for (&i, h) in geometry.masked.iter().zip(&hit) {
             observed[i] = *h;
         }
-        Some(Self {
+        Ok(Some(Self {
             resolution: rv,
             observed,
             masked: geometry.masked.len(),
             step,
-        })
+        }))
     }
 
     /// Fraction of the masked pixels that are observed.
@@ -242,7 +249,11 @@ impl ObservedMap {
 }
 
 /// The z-depth that `field` (a no-graph copy) renders along `rays`, in chunks.
-fn render_depth(field: &NerfField, ctx: &RenderContext<'_>, rays: &RayBatch) -> Vec<f32> {
+fn render_depth(
+    field: &NerfField,
+    ctx: &RenderContext<'_>,
+    rays: &RayBatch,
+) -> Result<Vec<f32>, TensorValuesError> {
     let mut out = Vec::with_capacity(rays.len());
     let n = rays.len();
     let mut start = 0;
@@ -263,11 +274,10 @@ fn render_depth(field: &NerfField, ctx: &RenderContext<'_>, rays: &RayBatch) -> 
             ctx.background,
             None,
         );
-        let d: Vec<f32> = o.depth.into_data().try_to_vec::<f32>().unwrap_or_default();
-        out.extend(d);
+        out.extend(f32_values(o.depth.into_data(), "visibility depth")?);
         start = end;
     }
-    out
+    Ok(out)
 }
 
 /// `x * w + x.detach() * (1 - w)`: the value of `x`, with the gradient that reaches `x`

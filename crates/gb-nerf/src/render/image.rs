@@ -3,6 +3,7 @@
 
 use burn::module::Module;
 use burn::tensor::{Tensor, TensorData};
+use gb_core::{f32_values, TensorValuesError};
 use serde::{Deserialize, Serialize};
 
 use super::normals::{depth_to_normals, Intrinsics, PlaneFitConfig};
@@ -62,7 +63,14 @@ pub struct ImageSettings<'a> {
 }
 
 /// Renders every pixel of `camera` with a no-grad copy of `field`.
-pub fn render_image(field: &NerfField, camera: &Camera, settings: &ImageSettings) -> ImageRender {
+///
+/// Errors when a rendered tensor does not hold `f32` values (a backend or precision surprise
+/// is reported, never turned into an empty render).
+pub fn render_image(
+    field: &NerfField,
+    camera: &Camera,
+    settings: &ImageSettings,
+) -> Result<ImageRender, TensorValuesError> {
     let field = field.valid();
     let pixels = all_pixels(camera.width, camera.height);
     let n = pixels.len();
@@ -92,22 +100,12 @@ pub fn render_image(field: &NerfField, camera: &Camera, settings: &ImageSettings
                 &camera.c2w,
                 step,
             );
-            let v: Vec<f32> = nt.into_data().try_to_vec::<f32>().unwrap_or_default();
+            let v = f32_values(nt.into_data(), "rendered normals")?;
             normals.extend(v.chunks(3).map(|c| [c[0], c[1], c[2]]));
         }
-        rgb.extend(out.rgb.into_data().try_to_vec::<f32>().unwrap_or_default());
-        depth.extend(
-            out.depth
-                .into_data()
-                .try_to_vec::<f32>()
-                .unwrap_or_default(),
-        );
-        opacity.extend(
-            out.opacity
-                .into_data()
-                .try_to_vec::<f32>()
-                .unwrap_or_default(),
-        );
+        rgb.extend(f32_values(out.rgb.into_data(), "rendered colour")?);
+        depth.extend(f32_values(out.depth.into_data(), "rendered depth")?);
+        opacity.extend(f32_values(out.opacity.into_data(), "rendered opacity")?);
     }
     if let NormalSource::PlaneFit(cfg) = settings.normals {
         let device = field.device();
@@ -115,13 +113,13 @@ pub fn render_image(field: &NerfField, camera: &Camera, settings: &ImageSettings
             TensorData::new(depth.clone(), [camera.height, camera.width]),
             &device,
         );
-        let v: Vec<f32> = depth_to_normals(d, Intrinsics::of(camera), cfg)
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_default();
+        let v = f32_values(
+            depth_to_normals(d, Intrinsics::of(camera), cfg).into_data(),
+            "plane-fit normals",
+        )?;
         normals = v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
     }
-    ImageRender {
+    Ok(ImageRender {
         rgb: gb_core::RgbImage {
             width: camera.width,
             height: camera.height,
@@ -131,5 +129,5 @@ pub fn render_image(field: &NerfField, camera: &Camera, settings: &ImageSettings
         opacity,
         normals,
         evaluations_per_ray: evals as f32 / n.max(1) as f32,
-    }
+    })
 }

@@ -7,6 +7,7 @@
 //! `occupied = d > density_threshold`, where the threshold is the density at which a
 //! typical sample interval reaches `opacity_threshold` opacity.
 
+use gb_core::{f32_values, TensorValuesError};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
@@ -78,8 +79,15 @@ impl OccupancyGrid {
     }
 
     /// Refreshes `cells` random cells (all when 0 or more than the grid) with densities of
-    /// `field` (use a no-grad copy), decaying the others' estimates.
-    pub fn update<R: Rng>(&mut self, field: &NerfField, cells: usize, decay: f32, rng: &mut R) {
+    /// `field` (use a no-grad copy), decaying the others' estimates. Errors when the field's
+    /// densities are not `f32` values (the grid is then left partly updated: a fatal error).
+    pub fn update<R: Rng>(
+        &mut self,
+        field: &NerfField,
+        cells: usize,
+        decay: f32,
+        rng: &mut R,
+    ) -> Result<(), TensorValuesError> {
         let r = self.resolution;
         let total = self.density.len();
         let chosen: Vec<usize> = if cells == 0 || cells >= total {
@@ -98,11 +106,7 @@ impl OccupancyGrid {
                     idx.map(|i| (i as f32 + rng.random::<f32>()) / r as f32)
                 })
                 .collect();
-            let sigma: Vec<f32> = field
-                .density(&pts)
-                .into_data()
-                .try_to_vec::<f32>()
-                .unwrap_or_default();
+            let sigma = f32_values(field.density(&pts).into_data(), "occupancy-grid densities")?;
             for (&c, s) in chunk.iter().zip(sigma) {
                 let s = if s.is_finite() { s } else { f32::MAX };
                 self.density[c] = self.density[c].max(s);
@@ -111,6 +115,7 @@ impl OccupancyGrid {
         for (o, d) in self.occupied.iter_mut().zip(&self.density) {
             *o = *d > self.density_threshold;
         }
+        Ok(())
     }
 }
 
