@@ -1,15 +1,20 @@
 //! `cargo xtask`: the gb-nerf-rs command line.
 //!
-//! Every subcommand lives in its own file under `cmd/`. Errors are printed as one clear
-//! line (with their causes) and exit with code 2; nothing a user types ends in a panic.
+//! Every subcommand lives in its own file under `cmd/`. Errors (argument errors included)
+//! are printed as one clear line, `error: ...` (with their causes), the last line on stderr,
+//! and exit with code 2; nothing a user types ends in a panic. Logs go to stderr without
+//! colour codes unless stderr is a terminal, and hide the progress bars while they print.
 
 mod cmd;
 
+use std::io::IsTerminal;
+
+use clap::error::ErrorKind;
 use clap::{Parser, Subcommand};
 
 /// NeRF object removal with a geometric diffusion prior and Balanced Score Distillation.
 #[derive(Parser)]
-#[command(name = "cargo xtask", version, about)]
+#[command(name = "cargo xtask", bin_name = "cargo xtask", version, about)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -41,15 +46,55 @@ enum Command {
     SceneInfo(cmd::scene_info::Args),
 }
 
-fn main() {
+/// Logs at `RUST_LOG` (default `info`) on stderr, through the writer that suspends the
+/// progress bars of `gb_core::progress` while a line is written.
+fn init_logging() {
+    let bars = indicatif::MultiProgress::new();
+    gb_core::progress::install(bars.clone());
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
-        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .with_writer(tracing_indicatif::IndicatifWriter::<
+            tracing_indicatif::writer::Stderr,
+        >::new(bars))
         .init();
-    let cli = Cli::parse();
+}
+
+/// Parses the command line; a usage error is printed as one `error: ...` line (exit 2),
+/// `--help` and `--version` as clap prints them.
+fn parse_cli() -> Cli {
+    match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => {
+            e.exit()
+        }
+        Err(e) if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.exit(),
+        Err(e) => {
+            eprintln!("error: {}", usage_error_line(&e.render().to_string()));
+            std::process::exit(2);
+        }
+    }
+}
+
+/// clap's multi-line usage error as one line: the message, its details, then the usage,
+/// without the "For more information" hint.
+fn usage_error_line(rendered: &str) -> String {
+    let body = rendered.trim_start();
+    let body = body.strip_prefix("error:").unwrap_or(body);
+    let parts: Vec<&str> = body
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with("For more information"))
+        .collect();
+    format!("{} (see --help)", parts.join("; "))
+}
+
+fn main() {
+    init_logging();
+    let cli = parse_cli();
     let result = match cli.command {
         Command::Devices(a) => cmd::devices::run(a),
         Command::Eval(a) => cmd::eval::run(a),
@@ -64,7 +109,7 @@ fn main() {
         Command::SceneInfo(a) => cmd::scene_info::run(a),
     };
     if let Err(e) = result {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {}", gb_core::messages::one_line(&format!("{e:#}")));
         std::process::exit(2);
     }
 }

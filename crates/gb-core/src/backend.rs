@@ -47,6 +47,15 @@ impl BackendKind {
             BackendKind::Wgpu => "wgpu",
         }
     }
+
+    /// Other names accepted for this backend on the command line.
+    pub fn aliases(self) -> &'static [&'static str] {
+        match self {
+            BackendKind::Ndarray => &[],
+            BackendKind::Flex => &["cpu"],
+            BackendKind::Wgpu => &["gpu", "vulkan"],
+        }
+    }
 }
 
 impl fmt::Display for BackendKind {
@@ -63,12 +72,11 @@ pub struct UnknownBackend(pub String);
 impl FromStr for BackendKind {
     type Err = UnknownBackend;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s.trim().to_ascii_lowercase().as_str() {
-            "ndarray" => Ok(BackendKind::Ndarray),
-            "flex" | "cpu" => Ok(BackendKind::Flex),
-            "wgpu" | "gpu" | "vulkan" => Ok(BackendKind::Wgpu),
-            other => Err(UnknownBackend(other.to_string())),
-        }
+        let s = s.trim().to_ascii_lowercase();
+        BackendKind::ALL
+            .into_iter()
+            .find(|k| k.name() == s || k.aliases().contains(&s.as_str()))
+            .ok_or(UnknownBackend(s))
     }
 }
 
@@ -116,6 +124,8 @@ mod tests {
         );
         assert_eq!("FLEX".parse::<BackendKind>().unwrap(), BackendKind::Flex);
         assert_eq!("wgpu".parse::<BackendKind>().unwrap(), BackendKind::Wgpu);
+        assert_eq!(" cpu".parse::<BackendKind>().unwrap(), BackendKind::Flex);
+        assert_eq!("Vulkan".parse::<BackendKind>().unwrap(), BackendKind::Wgpu);
         let err = "cuda".parse::<BackendKind>().unwrap_err();
         assert!(err.to_string().contains("cuda"));
     }

@@ -1,10 +1,14 @@
 //! Shared plumbing used by every gb-nerf-rs crate: run-time backend selection
-//! ([`backend`]), crash-safe file writes ([`atomic`]) and PNG/JPEG image IO ([`image_io`]).
+//! ([`backend`]), crash-safe file writes ([`atomic`]), PNG/JPEG image IO ([`image_io`]),
+//! progress bars that do not fight the log ([`progress`]) and one-line error messages
+//! ([`messages`]).
 
 pub mod assets;
 pub mod atomic;
 pub mod backend;
 pub mod image_io;
+pub mod messages;
+pub mod progress;
 pub mod resample;
 pub mod tensor_values;
 pub mod testdata;

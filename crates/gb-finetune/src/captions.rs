@@ -169,7 +169,18 @@ fn stem_of(key: &str) -> String {
 impl CaptionFile {
     /// Reads and parses a caption file.
     pub fn load(path: &Path) -> Result<Self, FinetuneError> {
-        let text = std::fs::read_to_string(path).map_err(|e| FinetuneError::io(path, e))?;
+        let bytes = std::fs::read(path).map_err(|e| FinetuneError::io(path, e))?;
+        let text = String::from_utf8(bytes).map_err(|e| {
+            let at = e.utf8_error().valid_up_to();
+            let line = e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count() + 1;
+            FinetuneError::Invalid {
+                path: path.to_path_buf(),
+                message: format!(
+                    "line {line}: not UTF-8 text (invalid byte at offset {at}); a caption file \
+                     is UTF-8 JSON Lines"
+                ),
+            }
+        })?;
         Self::parse(&text, path)
     }
 
@@ -273,5 +284,17 @@ mod tests {
         assert_eq!(f.get("b_rgb.png"), Some("B"));
         assert_eq!(f.get("b"), Some("B"));
         assert_eq!(f.get("c.png"), None);
+    }
+
+    #[test]
+    fn a_file_that_is_not_utf8_names_its_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("latin1.jsonl");
+        std::fs::write(&p, b"{\"image\": \"a\", \"caption\": \"ok\"}\n{\"image\": \"b\", \"caption\": \"caf\xe9\"}\n").unwrap();
+        let err = CaptionFile::load(&p).unwrap_err().to_string();
+        assert!(
+            err.contains("latin1.jsonl") && err.contains("line 2") && err.contains("UTF-8"),
+            "{err}"
+        );
     }
 }

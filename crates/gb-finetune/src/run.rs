@@ -169,7 +169,7 @@ pub fn run_finetune(
         .map_err(|e| FinetuneError::io(&cfg_path, e))?;
 
     let bar = if opts.progress {
-        let b = ProgressBar::new(cfg.steps as u64);
+        let b = gb_core::progress::bar(cfg.steps as u64);
         b.set_style(
             ProgressStyle::with_template("{bar:30} {pos}/{len} {per_sec} eta {eta} {msg}")
                 .unwrap_or_else(|_| ProgressStyle::default_bar()),

@@ -79,7 +79,7 @@ impl TinyPriorRecipe {
         let text = std::fs::read_to_string(path).map_err(|e| FinetuneError::io(path, e))?;
         let r: Self = toml::from_str(&text).map_err(|e| FinetuneError::Invalid {
             path: path.to_path_buf(),
-            message: e.to_string(),
+            message: gb_core::messages::at_line(&text, e.span(), e.message()),
         })?;
         r.base.validate()?;
         r.lora.validate()?;
@@ -170,7 +170,7 @@ pub fn run_recipe(
         })?;
         (log, json)
     } else {
-        let bar = progress.then(|| indicatif::ProgressBar::new(recipe.vae.steps as u64));
+        let bar = progress.then(|| gb_core::progress::bar(recipe.vae.steps as u64));
         let (vae, losses) = train_vae(&vae_cfg, &train, &recipe.vae, device, |_, l| {
             if let Some(b) = &bar {
                 b.inc(1);

@@ -495,7 +495,7 @@ impl MethodConfig {
     pub fn from_toml(text: &str, origin: &Path) -> Result<Self, InpaintError> {
         let cfg: MethodConfig = toml::from_str(text).map_err(|e| InpaintError::MethodConfig {
             path: origin.to_path_buf(),
-            reason: e.to_string(),
+            reason: gb_core::messages::at_line(text, e.span(), e.message()),
         })?;
         cfg.validate()
             .map_err(|reason| InpaintError::MethodConfig {

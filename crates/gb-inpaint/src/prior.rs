@@ -44,6 +44,12 @@ pub fn lora_for(
     explicit: Option<&Path>,
 ) -> Result<Option<PathBuf>, InpaintError> {
     if let Some(p) = explicit {
+        if !p.is_file() {
+            return Err(InpaintError::Lora {
+                path: p.to_path_buf(),
+                reason: "no such file (--lora takes a .safetensors LoRA file)".into(),
+            });
+        }
         if !method.use_lora {
             tracing::warn!(
                 lora = %p.display(),

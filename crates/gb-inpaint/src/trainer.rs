@@ -743,7 +743,7 @@ impl GuidedTrainer {
         let start = Instant::now();
         let first = self.nerf.step;
         let bar = if opts.progress {
-            ProgressBar::new(total as u64)
+            gb_core::progress::bar(total as u64)
         } else {
             ProgressBar::hidden()
         };

@@ -172,3 +172,60 @@ fn blender_frame_without_transform_names_the_json() {
         "{s}"
     );
 }
+
+#[test]
+fn nan_or_infinity_in_a_depth_map_names_the_file_and_pixel() {
+    let d = tempfile::tempdir().unwrap();
+    fixture(d.path());
+    let p = d.path().join("depth_1/view_004.npy");
+    let mut a = gb_nerf::scene::npy::read_float_array(&p).unwrap();
+    assert_eq!(a.shape, vec![24, 32]);
+    a.data[32 * 5 + 7] = f64::INFINITY;
+    let shape = a.shape.clone();
+    let f32s: Vec<f32> = a.data.iter().map(|&v| v as f32).collect();
+    std::fs::write(&p, gb_nerf::scene::npy::encode_f32(&shape, &f32s).unwrap()).unwrap();
+    let (e, s) = err(d.path());
+    assert!(
+        matches!(e, SceneError::NonFiniteArray { x: 7, y: 5, .. }),
+        "{e:?}"
+    );
+    assert!(s.contains("view_004.npy") && s.contains("inf"), "{s}");
+}
+
+#[test]
+fn a_mask_with_grey_levels_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    fixture(d.path());
+    let p = d.path().join("images_1/label/view_003.png");
+    let (w, h, mut v) = gb_core::read_gray(&p).unwrap();
+    v[0] = 0.25;
+    gb_core::write_gray_png(&p, w, h, &v).unwrap();
+    let (e, s) = err(d.path());
+    assert!(
+        matches!(e, SceneError::MaskNotBinary { pixels: 1, .. }),
+        "{e:?}"
+    );
+    assert!(
+        s.contains("view_003.png") && s.contains("not binary"),
+        "{s}"
+    );
+}
+
+#[test]
+fn blender_frame_naming_a_missing_image_names_the_json_and_the_file() {
+    let d = tempfile::tempdir().unwrap();
+    std::fs::write(
+        d.path().join("transforms.json"),
+        br#"{"camera_angle_x": 0.7, "frames": [{"file_path": "./gone",
+            "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]}]}"#,
+    )
+    .unwrap();
+    let (_, s) = err(d.path());
+    assert!(
+        s.contains("transforms.json")
+            && s.contains("frame 0")
+            && s.contains("gone.png")
+            && s.contains("does not exist"),
+        "{s}"
+    );
+}

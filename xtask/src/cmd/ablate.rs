@@ -51,11 +51,11 @@ pub struct GridArgs {
     /// The diffusion prior of the guided methods: tiny (default), a folder or a hub id.
     #[arg(long)]
     pub prior: Option<String>,
-    /// Override the preset's number of training steps.
-    #[arg(long)]
+    /// Override the preset's number of training steps (at least 1).
+    #[arg(long, value_parser = super::parse::at_least_one)]
     pub steps: Option<usize>,
     /// Compute backend: ndarray, flex or wgpu.
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse::device())]
     pub device: Option<BackendKind>,
 }
 

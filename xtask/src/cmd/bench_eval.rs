@@ -32,7 +32,7 @@ pub struct Args {
     #[arg(long, default_value_t = 3)]
     repeats: usize,
     /// Backend for ST-LPIPS.
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse::device())]
     device: Option<BackendKind>,
     /// The shared data folder (default: $GB_TEST_DATA).
     #[arg(long)]

@@ -45,7 +45,7 @@ pub struct Args {
     #[arg(long, default_value = "cpu")]
     pub torch_device: String,
     /// Backend that trains the accuracy points.
-    #[arg(long, default_value = "flex")]
+    #[arg(long, default_value = "flex", value_parser = super::parse::device())]
     pub accuracy_device: BackendKind,
     /// Also train every preset to completion on flex and record PSNR against wall time.
     #[arg(long)]
@@ -79,7 +79,7 @@ fn train_with_curve(
         return Ok(t.fit(None, true)?.seconds);
     }
     let steps = t.config.train.steps;
-    let bar = indicatif::ProgressBar::new(steps as u64);
+    let bar = gb_core::progress::bar(steps as u64);
     let mut seconds = 0.0;
     while t.step < steps {
         let t0 = std::time::Instant::now();

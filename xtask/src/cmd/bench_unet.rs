@@ -34,7 +34,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     repeats: usize,
     /// Backend: ndarray, flex (default) or wgpu.
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse::device())]
     device: Option<BackendKind>,
     /// Python with torch and diffusers (default: $GB_PYREF_PYTHON, else /work/pyref/bin/python);
     /// `none` skips the reference.

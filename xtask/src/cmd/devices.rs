@@ -7,7 +7,7 @@ use gb_core::BackendKind;
 #[derive(clap::Args)]
 pub struct Args {
     /// Only check this backend.
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse::device())]
     device: Option<BackendKind>,
 }
 

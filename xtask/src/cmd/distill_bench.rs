@@ -27,7 +27,7 @@ pub struct Args {
     #[arg(long)]
     pub resolution: Option<usize>,
     /// Compute backend.
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse::device())]
     pub device: Option<BackendKind>,
     /// Output JSON (default bench/results/distill-<device>.json).
     #[arg(long)]

@@ -12,7 +12,7 @@ use gb_diffusion::distill::{
     distill_view, DistillSettings, GuidanceMethod, PriorInputMode, PriorModels, PromptCache,
     ScoreDistiller, TimestepConfig, ViewConditioning, Weighting,
 };
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressStyle;
 
 /// Guidance method on the command line.
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
@@ -78,7 +78,7 @@ pub struct Args {
     #[arg(long)]
     pub grad_clamp: Option<f32>,
     /// Compute backend.
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse::device())]
     pub device: Option<BackendKind>,
     /// Output folder.
     #[arg(long)]
@@ -157,7 +157,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut adam = Adam::new(&pixels, args.lr);
     let mut snapshots = vec![image.clone()];
     let mut log = String::new();
-    let bar = ProgressBar::new(args.steps as u64);
+    let bar = gb_core::progress::bar(args.steps as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),

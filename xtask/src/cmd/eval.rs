@@ -90,7 +90,7 @@ pub struct Args {
     #[arg(long)]
     markdown: Option<PathBuf>,
     /// Backend for the network metrics.
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse::device())]
     device: Option<BackendKind>,
     /// LPIPS network: ST-LPIPS AlexNet (weights `stlpips_alex_shift_tolerant.safetensors`),
     /// or standard LPIPS with user weights `lpips_alex.safetensors` / `lpips_vgg.safetensors`
@@ -252,7 +252,7 @@ impl Ctx {
         if len < PROGRESS_MIN {
             return ProgressBar::hidden();
         }
-        let pb = ProgressBar::new(len as u64);
+        let pb = gb_core::progress::bar(len as u64);
         if let Ok(style) = ProgressStyle::with_template("{msg:>8} [{bar:30}] {pos}/{len} {elapsed}")
         {
             pb.set_style(style);

@@ -110,7 +110,7 @@ pub struct Args {
     #[arg(long)]
     pub validation_blend_known: bool,
     /// Compute backend: ndarray, flex or wgpu.
-    #[arg(long, default_value = "flex")]
+    #[arg(long, default_value = "flex", value_parser = super::parse::device())]
     pub device: BackendKind,
     /// Output folder.
     #[arg(long, default_value = "out/finetune")]
@@ -123,8 +123,18 @@ pub struct Args {
     pub quiet: bool,
 }
 
-/// The folder of a `--base`/`--prior` argument: `tiny`, a local folder, or a hub id.
+/// The folder of a `--base`/`--prior` argument: `tiny`, a local folder, or a hub id. A
+/// single-file checkpoint, or a folder with PyTorch pickle weights only, is refused here,
+/// before anything is loaded, with the command that converts it to safetensors.
 pub fn resolve_prior(spec: &str) -> anyhow::Result<PathBuf> {
+    let dir = locate_prior(spec)?;
+    gb_diffusion::checkpoint::DiffusersFolder::open(&dir)
+        .and_then(|folder| folder.check_weight_formats())
+        .with_context(|| format!("prior `{spec}`"))?;
+    Ok(dir)
+}
+
+fn locate_prior(spec: &str) -> anyhow::Result<PathBuf> {
     if spec == "tiny" {
         let dir = gb_core::tiny_prior_dir();
         if !dir.join("model_index.json").is_file() {

@@ -103,13 +103,13 @@ pub struct Args {
     #[arg(long, default_value = "out/inpaint")]
     pub out: PathBuf,
     /// Compute backend: ndarray, flex or wgpu.
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse::device())]
     pub device: Option<BackendKind>,
     /// Continue from OUT/checkpoint.bin when it exists.
     #[arg(long)]
     pub resume: bool,
-    /// Override the preset's number of training steps.
-    #[arg(long)]
+    /// Override the preset's number of training steps (at least 1).
+    #[arg(long, value_parser = super::parse::at_least_one)]
     pub steps: Option<usize>,
     /// Override the preset's training seed (`[train] seed`: ray batches, the guidance's
     /// timesteps and noise); `bench quality --seeds` repeats a grid over seeds with it.
@@ -197,7 +197,8 @@ fn load_method(spec: &str) -> anyhow::Result<MethodConfig> {
     Ok(MethodConfig::load(spec)?)
 }
 
-/// Errors when no training view has a non-empty mask.
+/// Errors when no training view has a non-empty mask, or when a training view's mask covers
+/// the whole image (no pixel of that view is left to supervise the NeRF: an inverted mask).
 fn require_masks(scene: &Scene) -> anyhow::Result<()> {
     let masked = scene
         .split(Split::Train)
@@ -208,6 +209,34 @@ fn require_masks(scene: &Scene) -> anyhow::Result<()> {
             scene: scene.name.clone(),
         }
         .into());
+    }
+    for view in scene.split(Split::Train) {
+        if let Some(m) = view.mask.as_ref().filter(|m| m.data.iter().all(|&b| b)) {
+            bail!(
+                "scene '{}': the mask of training view '{}' covers the whole {}x{} image, so no pixel \
+                 of it is left to supervise the NeRF (an inverted mask? masks are non-zero on \
+                 the object only)",
+                scene.name,
+                view.name,
+                m.width,
+                m.height
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Fails when `--out` cannot be a folder: it, or the first of its ancestors that exists, is
+/// not a folder. Checked before anything is loaded; creating it comes later.
+fn check_out(out: &Path) -> anyhow::Result<()> {
+    if let Some(existing) = out.ancestors().find(|p| p.exists()) {
+        if !existing.is_dir() {
+            bail!(
+                "--out {}: {} is a file, not a folder, so the output folder cannot be created",
+                out.display(),
+                existing.display()
+            );
+        }
     }
     Ok(())
 }
@@ -232,6 +261,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// ablate`, which calls it once per method).
 pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
     let device = args.device.unwrap_or_default();
+    check_out(&args.out)?;
     if let Some(b) = &args.baseline {
         if !b.is_dir() {
             bail!(
@@ -295,8 +325,12 @@ pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
     let prompts = method.resolve_prompts(&SceneCaptions::read(&scene_dir), &overrides);
     let prior_info = prior.as_ref().map(|p| p.info.clone());
 
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out).with_context(|| {
+        format!(
+            "--out {}: cannot create the output folder",
+            args.out.display()
+        )
+    })?;
     let ckpt = args.out.join("checkpoint.bin");
     let resuming = args.resume && ckpt.is_file();
     let guidance = prior.map(|p| (p, prompts.clone()));

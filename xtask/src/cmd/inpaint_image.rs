@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use gb_core::{read_gray, read_rgb, write_rgb_png, BackendKind, RgbImage};
 use gb_diffusion::inpaint::{inpaint, InpaintPrior, InpaintRequest};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressStyle;
 
 /// Arguments of `cargo xtask inpaint-image`.
 #[derive(clap::Args)]
@@ -44,7 +44,7 @@ pub struct Args {
     #[arg(long)]
     blend_known: bool,
     /// Backend: ndarray, flex (default) or wgpu.
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse::device())]
     device: Option<BackendKind>,
 }
 
@@ -89,7 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         init_latents: None,
         blend_known: args.blend_known,
     };
-    let bar = ProgressBar::new(args.steps as u64);
+    let bar = gb_core::progress::bar(args.steps as u64);
     bar.set_style(
         ProgressStyle::with_template(
             "{bar:40} {pos}/{len} t={msg} [{elapsed_precise}<{eta_precise}]",

@@ -15,5 +15,6 @@ pub mod finetune;
 pub mod inpaint;
 pub mod inpaint_image;
 pub mod parity;
+pub mod parse;
 pub mod scene;
 pub mod scene_info;

@@ -79,7 +79,7 @@ pub struct Args {
     #[arg(long)]
     pub lora: Option<PathBuf>,
     /// Compute backend: ndarray, flex (default) or wgpu.
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse::device())]
     pub device: Option<BackendKind>,
     /// Weight variant.
     #[arg(long, value_enum, default_value_t)]

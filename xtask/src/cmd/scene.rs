@@ -17,11 +17,11 @@ pub struct Args {
     /// Seed of textures, object placement and camera wobble.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Image width in pixels.
-    #[arg(long, default_value_t = 200)]
+    /// Image width in pixels (8 to 8192).
+    #[arg(long, default_value_t = 200, value_parser = super::parse::image_side)]
     width: usize,
-    /// Image height in pixels.
-    #[arg(long, default_value_t = 150)]
+    /// Image height in pixels (8 to 8192).
+    #[arg(long, default_value_t = 150, value_parser = super::parse::image_side)]
     height: usize,
     /// Number of views (train + test).
     #[arg(long, default_value_t = 24)]

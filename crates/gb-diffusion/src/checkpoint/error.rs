@@ -15,6 +15,35 @@ pub enum CheckpointError {
         /// What it should have contained.
         what: String,
     },
+    /// A single file where a diffusers pipeline folder is expected.
+    #[error(
+        "{path}: a single-file checkpoint{pickle}, but a prior is a diffusers pipeline folder \
+         (model_index.json, unet/, vae/, text_encoder/, tokenizer/, scheduler/) with \
+         .safetensors weights; convert it with diffusers: {advice}"
+    )]
+    SingleFile {
+        /// The file given.
+        path: PathBuf,
+        /// `" (a PyTorch pickle, which is never loaded: unpickling can run code)"` for a
+        /// pickle, else empty.
+        pickle: String,
+        /// The conversion command.
+        advice: String,
+    },
+    /// A component folder holds PyTorch pickle weights and no `.safetensors`.
+    #[error(
+        "{path}: PyTorch pickle weights are not loaded (unpickling can run code) and the \
+         `{component}` folder has no .safetensors file; convert the pipeline to safetensors: \
+         {advice}"
+    )]
+    PickleWeights {
+        /// The pickle file found.
+        path: PathBuf,
+        /// The component (`unet`, `vae`, `text_encoder`).
+        component: String,
+        /// The conversion command.
+        advice: String,
+    },
     /// A config file could not be read or parsed.
     #[error(transparent)]
     Config(#[from] ConfigError),

@@ -30,9 +30,26 @@ pub struct DiffusersFolder {
 }
 
 impl DiffusersFolder {
-    /// Opens `root`, reading `model_index.json` when present.
+    /// Opens `root`, reading `model_index.json` when present. A single file (a `.ckpt`,
+    /// `.bin` or single-file `.safetensors` checkpoint) is refused with the command that
+    /// converts it.
     pub fn open(root: impl Into<PathBuf>) -> Result<Self, CheckpointError> {
         let root = root.into();
+        if root.is_file() {
+            return Err(CheckpointError::SingleFile {
+                pickle: if is_pickle(&root) {
+                    " (a PyTorch pickle, which is never loaded: unpickling can run code)".into()
+                } else {
+                    String::new()
+                },
+                advice: format!(
+                    "python -c \"from diffusers import StableDiffusionInpaintPipeline as P; \
+                     P.from_single_file('{}').save_pretrained('prior', safe_serialization=True)\"",
+                    root.display()
+                ),
+                path: root,
+            });
+        }
         if !root.is_dir() {
             return Err(CheckpointError::MissingFile {
                 path: root,
@@ -93,6 +110,9 @@ impl DiffusersFolder {
             WeightVariant::Auto => fp16,
         };
         if chosen.is_empty() {
+            if let Some(pickle) = pickle_files(&dir).into_iter().next() {
+                return Err(self.pickle_error(name, pickle));
+            }
             return Err(CheckpointError::MissingFile {
                 path: dir,
                 what: format!("*.safetensors weights ({variant:?})"),
@@ -100,6 +120,78 @@ impl DiffusersFolder {
         }
         Ok(chosen)
     }
+}
+
+impl DiffusersFolder {
+    /// Checks, before anything is loaded, that every weight-holding component folder present
+    /// (`unet`, `vae`, `text_encoder`) has `.safetensors` weights: one holding only PyTorch
+    /// pickles is refused with the command that converts the pipeline.
+    pub fn check_weight_formats(&self) -> Result<(), CheckpointError> {
+        for name in ["unet", "vae", "text_encoder"] {
+            let dir = self.root.join(name);
+            if !dir.is_dir() {
+                continue;
+            }
+            let (full, fp16) = list_safetensors(&dir)?;
+            if full.is_empty() && fp16.is_empty() {
+                if let Some(pickle) = pickle_files(&dir).into_iter().next() {
+                    return Err(self.pickle_error(name, pickle));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn pickle_error(&self, component: &str, path: PathBuf) -> CheckpointError {
+        CheckpointError::PickleWeights {
+            path,
+            component: component.to_string(),
+            advice: format!(
+                "python -c \"from diffusers import StableDiffusionInpaintPipeline as P; \
+                 P.from_pretrained('{}').save_pretrained('prior-safetensors', \
+                 safe_serialization=True)\"",
+                self.root.display()
+            ),
+        }
+    }
+}
+
+/// File extensions of PyTorch pickle checkpoints.
+pub const PICKLE_EXTENSIONS: [&str; 5] = ["bin", "ckpt", "pt", "pth", "pkl"];
+
+/// Whether `path` is a PyTorch pickle: a pickle extension, or (for a file not named
+/// `.safetensors` / `.json`) the first bytes of a pickle (protocol 2+, `0x80`) or of
+/// `torch.save`'s zip archive (`PK\x03\x04`).
+pub fn is_pickle(path: &Path) -> bool {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    if PICKLE_EXTENSIONS.contains(&ext.as_str()) {
+        return true;
+    }
+    if ext == "safetensors" || ext == "json" {
+        return false;
+    }
+    let mut magic = [0u8; 4];
+    std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic))
+        .is_ok()
+        && (magic[0] == 0x80 || magic == *b"PK\x03\x04")
+}
+
+/// The PyTorch pickle files directly inside `dir`, sorted.
+fn pickle_files(dir: &Path) -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_file() && is_pickle(p))
+        .collect();
+    out.sort();
+    out
 }
 
 /// Splits the `*.safetensors` files of `dir` into plain and `.fp16` variants.
@@ -162,5 +254,46 @@ mod tests {
         std::fs::write(unet.join("diffusion_pytorch_model.safetensors"), b"x").unwrap();
         let auto = folder.weight_files("unet", WeightVariant::Auto).unwrap();
         assert_eq!(auto, vec![unet.join("diffusion_pytorch_model.safetensors")]);
+    }
+
+    #[test]
+    fn pickles_are_refused_with_the_conversion_command() {
+        let dir = tempfile::tempdir().unwrap();
+        let ckpt = dir.path().join("model.ckpt");
+        std::fs::write(&ckpt, b"\x80\x02}q\x00.").unwrap();
+        assert!(is_pickle(&ckpt));
+        let err = DiffusersFolder::open(&ckpt).unwrap_err().to_string();
+        assert!(
+            err.contains("model.ckpt")
+                && err.contains("pickle")
+                && err.contains("from_single_file"),
+            "{err}"
+        );
+        let single = dir.path().join("model.safetensors");
+        std::fs::write(&single, b"{}").unwrap();
+        let err = DiffusersFolder::open(&single).unwrap_err().to_string();
+        assert!(
+            err.contains("single-file") && !err.contains("pickle"),
+            "{err}"
+        );
+
+        let vae = dir.path().join("vae");
+        std::fs::create_dir(&vae).unwrap();
+        std::fs::write(vae.join("diffusion_pytorch_model.bin"), b"PK\x03\x04rest").unwrap();
+        let folder = DiffusersFolder::open(dir.path()).unwrap();
+        for err in [
+            folder.check_weight_formats().unwrap_err(),
+            folder.weight_files("vae", WeightVariant::Auto).unwrap_err(),
+        ] {
+            let err = err.to_string();
+            assert!(
+                err.contains("diffusion_pytorch_model.bin")
+                    && err.contains("`vae`")
+                    && err.contains("safe_serialization=True"),
+                "{err}"
+            );
+        }
+        std::fs::write(vae.join("diffusion_pytorch_model.safetensors"), b"x").unwrap();
+        assert!(folder.check_weight_formats().is_ok());
     }
 }

@@ -43,6 +43,10 @@ pub fn load_module<M: Module>(
                 what: format!("safetensors weights of {}", section.name),
             });
         }
+        super::header::check_file_layout(file).map_err(|message| CheckpointError::Weights {
+            path: file.clone(),
+            message,
+        })?;
         let mut store = SafetensorsStore::from_file(file.clone())
             .with_from_adapter(adapter())
             .remap(remapper.clone())

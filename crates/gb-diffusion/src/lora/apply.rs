@@ -161,6 +161,7 @@ fn transpose(values: &[f32], rows: usize, cols: usize) -> Vec<f32> {
 fn burn_factors(entry: &LoraEntry, target: &str, weight: &[usize]) -> Result<Factors, LoraError> {
     let mismatch = || LoraError::ShapeMismatch {
         target: target.to_string(),
+        key: entry.key.clone(),
         weight: weight.to_vec(),
         down: entry.down_shape.clone(),
         up: entry.up_shape.clone(),

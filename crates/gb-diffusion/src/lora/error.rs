@@ -44,10 +44,15 @@ pub enum LoraError {
         component: String,
     },
     /// The factors do not fit the weight they target.
-    #[error("LoRA for `{target}`: weight shape {weight:?} does not fit down {down:?} / up {up:?}")]
+    #[error(
+        "LoRA for `{target}` (key `{key}`): weight shape {weight:?} does not fit down {down:?} \
+         / up {up:?}"
+    )]
     ShapeMismatch {
         /// The parameter path.
         target: String,
+        /// The first key of the entry in the file.
+        key: String,
         /// The weight shape (Burn layout).
         weight: Vec<usize>,
         /// The down (A) factor shape.

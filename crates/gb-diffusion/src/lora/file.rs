@@ -91,7 +91,16 @@ impl LoraFile {
             path: path.to_path_buf(),
             message,
         };
+        if path.is_file() && crate::checkpoint::folder::is_pickle(path) {
+            return Err(file_err(format!(
+                "a PyTorch pickle, which is never loaded (unpickling can run code); convert it \
+                 to safetensors: python -c \"import torch; from safetensors.torch import \
+                 save_file; save_file(torch.load('{0}', weights_only=True), '{0}.safetensors')\"",
+                path.display()
+            )));
+        }
         let bytes = std::fs::read(path).map_err(|e| file_err(e.to_string()))?;
+        crate::checkpoint::header::check_layout(&bytes, bytes.len() as u64).map_err(file_err)?;
         let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| file_err(e.to_string()))?;
         let settings = peft_settings(meta.metadata().as_ref(), path)?;
         let st = SafeTensors::deserialize(&bytes).map_err(|e| file_err(e.to_string()))?;
@@ -107,8 +116,12 @@ impl LoraFile {
             } else {
                 legacy_module_name(module, component)
             };
-            let values = view_to_f32(&view)
-                .ok_or_else(|| file_err(format!("tensor `{key}` is not a float tensor")))?;
+            let values = view_to_f32(&view).ok_or_else(|| {
+                file_err(format!(
+                    "tensor `{key}` has dtype {:?}, expected a float dtype (F32, F16, BF16, F64)",
+                    view.dtype()
+                ))
+            })?;
             let shape = view.shape().to_vec();
             let p = partials.entry((component, module, kohya)).or_default();
             if p.key.is_empty() || key < p.key {

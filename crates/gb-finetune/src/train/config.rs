@@ -151,7 +151,7 @@ impl FinetuneConfig {
     pub fn from_toml(text: &str, origin: &std::path::Path) -> Result<Self, FinetuneError> {
         let cfg: Self = toml::from_str(text).map_err(|e| FinetuneError::Invalid {
             path: origin.to_path_buf(),
-            message: e.to_string(),
+            message: gb_core::messages::at_line(text, e.span(), e.message()),
         })?;
         cfg.validate()?;
         Ok(cfg)

@@ -168,6 +168,12 @@ fn load_frame(
     if img_path.extension().is_none() {
         img_path.set_extension("png");
     }
+    if !img_path.is_file() {
+        return Err(bad(format!(
+            "file_path \"{rel}\" names {}, which does not exist",
+            img_path.display()
+        )));
+    }
     let image = gb_core::read_rgb(&img_path, Some(bg))?;
     let (w, h) = (image.width, image.height);
     let m = frame

@@ -117,6 +117,30 @@ pub enum SceneError {
         /// Shape expected, in words.
         expected: String,
     },
+    /// A mask file whose values are not binary.
+    #[error("{path}: mask is not binary: {pixels} of {total} pixels lie strictly between 0 and its maximum; object masks are 0/1 or 0/255 (non-zero on the object)")]
+    MaskNotBinary {
+        /// The mask file.
+        path: PathBuf,
+        /// Pixels that are neither 0 nor the maximum.
+        pixels: usize,
+        /// All pixels.
+        total: usize,
+    },
+    /// A depth or normal array holds NaN or infinity.
+    #[error(
+        "{path}: non-finite value {value} at pixel ({x}, {y}); mark pixels without a value with 0"
+    )]
+    NonFiniteArray {
+        /// The file.
+        path: PathBuf,
+        /// Column of the first such pixel.
+        x: usize,
+        /// Row of the first such pixel.
+        y: usize,
+        /// The value.
+        value: f64,
+    },
     /// An invalid option value.
     #[error("invalid option: {0}")]
     Option(String),

@@ -7,8 +7,9 @@
 //! DIR/images_F/*.png|jpg      the images, downscaled by F (images/ means F = 1)
 //! DIR/images_F/label/         object masks of training views (0/1 or 0/255), same names
 //! DIR/images_F/test_label/    masks of the test views (SPIn-NeRF)
-//! DIR/depth_F/NAME.npy        optional z-depth, H x W float32 (procedural scenes)
-//! DIR/normal_F/NAME.npy       optional unit world normals, H x W x 3 float32
+//! DIR/depth_F/NAME.npy        optional z-depth, H x W float32 (procedural scenes); 0 where
+//!                             there is no depth (NaN and infinity are refused)
+//! DIR/normal_F/NAME.npy       optional unit world normals, H x W x 3 float32 (finite)
 //! DIR/scene.json              optional; `aabb_min`/`aabb_max` make the scene Bounded
 //! ```
 //!
@@ -343,6 +344,20 @@ fn camera_for(
     }
 }
 
+/// Errors on the first NaN or infinity of an `[h, w, channels]` array, naming its pixel.
+fn require_finite(path: &Path, data: &[f64], w: usize, channels: usize) -> Result<(), SceneError> {
+    match data.iter().position(|v| !v.is_finite()) {
+        Some(i) => Err(SceneError::NonFiniteArray {
+            path: path.to_path_buf(),
+            x: (i / channels) % w.max(1),
+            y: (i / channels) / w.max(1),
+            value: data[i],
+        }),
+        None => Ok(()),
+    }
+}
+
+/// A z-depth map (0 or less where there is no depth); NaN and infinity are refused.
 fn read_depth(path: &Path, w: usize, h: usize, scale: f64) -> Result<Option<Vec<f32>>, SceneError> {
     if !path.is_file() {
         return Ok(None);
@@ -355,6 +370,7 @@ fn read_depth(path: &Path, w: usize, h: usize, scale: f64) -> Result<Option<Vec<
             expected: format!("[{h}, {w}]"),
         });
     }
+    require_finite(path, &a.data, w, 1)?;
     Ok(Some(a.data.iter().map(|&d| (d * scale) as f32).collect()))
 }
 
@@ -375,6 +391,7 @@ fn read_normals(
             expected: format!("[{h}, {w}, 3]"),
         });
     }
+    require_finite(path, &a.data, w, 3)?;
     Ok(Some(
         a.data
             .chunks_exact(3)

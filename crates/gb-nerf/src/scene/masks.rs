@@ -4,7 +4,10 @@ use super::{Mask, SceneError};
 use std::path::Path;
 
 /// Reads a mask file and binarises it. Masks stored as 0/1 and as 0/255 both work: the
-/// threshold is half the file's maximum value (an all-zero file is an empty mask).
+/// threshold is half the file's maximum value (an all-zero file is an empty mask). A PNG mask
+/// must be binary (every pixel 0 or the file's maximum); a grey level in between is an error
+/// naming the file, since a soft or anti-aliased mask has no meaning for object removal.
+/// JPEG masks, which compression makes non-binary, are thresholded.
 ///
 /// When the mask's size differs from `(width, height)`, a mask at least as large in both
 /// directions is cropped to its top-left `width x height` region (the case seen in
@@ -18,6 +21,18 @@ pub fn read_mask(
 ) -> Result<Mask, SceneError> {
     let (w, h, values) = gb_core::read_gray(path)?;
     let max = values.iter().copied().fold(0.0f32, f32::max);
+    let lossy = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "jpg" | "jpeg"));
+    let between = values.iter().filter(|&&v| v > 0.0 && v < max).count();
+    if between > 0 && !lossy {
+        return Err(SceneError::MaskNotBinary {
+            path: path.to_path_buf(),
+            pixels: between,
+            total: values.len(),
+        });
+    }
     let threshold = max * 0.5;
     let bits: Vec<bool> = values.iter().map(|&v| max > 0.0 && v > threshold).collect();
     let raw = Mask {
@@ -129,6 +144,26 @@ mod tests {
         assert_eq!(ma, mb);
         assert_eq!(ma.data.iter().filter(|&&v| v).count(), 4);
         assert!(warn.is_empty());
+    }
+
+    #[test]
+    fn grey_levels_in_a_png_mask_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("soft.png");
+        write(&p, 4, 1, &[0.0, 0.5, 1.0, 1.0]);
+        let err = read_mask(&p, 4, 1, &mut Vec::new()).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                SceneError::MaskNotBinary {
+                    pixels: 1,
+                    total: 4,
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("soft.png"), "{err}");
     }
 
     #[test]

@@ -12,6 +12,7 @@ use crate::sampler::SamplerConfig;
 
 /// Everything the reconstruction needs: field, sampler, optimisation and rendering.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct NerfConfig {
     /// Preset name (informational).
     pub name: String,
@@ -27,6 +28,7 @@ pub struct NerfConfig {
 
 /// Optimisation settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TrainSettings {
     /// Training steps.
     pub steps: usize,
@@ -58,6 +60,7 @@ pub struct TrainSettings {
 
 /// Rendering settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct RenderSettings {
     /// Where normal maps come from.
     pub normals: NormalSource,
@@ -74,7 +77,7 @@ impl NerfConfig {
     pub fn from_toml(text: &str, origin: &Path) -> Result<Self, NerfError> {
         let cfg: NerfConfig = toml::from_str(text).map_err(|e| NerfError::Config {
             path: origin.to_path_buf(),
-            reason: e.to_string(),
+            reason: gb_core::messages::at_line(text, e.span(), e.message()),
         })?;
         cfg.validate(origin)?;
         Ok(cfg)
@@ -107,6 +110,9 @@ impl NerfConfig {
             })
         };
         let t = &self.train;
+        if t.steps == 0 {
+            return bad("train.steps must be > 0");
+        }
         if t.rays_per_batch == 0 {
             return bad("train.rays_per_batch must be > 0");
         }
@@ -176,5 +182,29 @@ mod tests {
     fn bad_config_names_the_file() {
         let err = NerfConfig::from_toml("name = 1", Path::new("x.toml")).unwrap_err();
         assert!(err.to_string().starts_with("x.toml:"), "{err}");
+    }
+
+    #[test]
+    fn unknown_fields_and_zero_values_are_one_line_errors() {
+        let typo = FAST.replace("lr_decay = 0.1", "lr_decay = 0.1\nlr_decya = 0.5");
+        let err = NerfConfig::from_toml(&typo, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("lr_decya") && err.contains("line "), "{err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        for (from, to, field) in [
+            ("steps = 400", "steps = 0", "train.steps"),
+            ("lr = 1e-2", "lr = -1e-2", "train.lr"),
+            (
+                "samples_per_ray = 40",
+                "samples_per_ray = 0",
+                "samples_per_ray",
+            ),
+        ] {
+            let err = NerfConfig::from_toml(&FAST.replace(from, to), Path::new("t.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(field), "{err}");
+        }
     }
 }

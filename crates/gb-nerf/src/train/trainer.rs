@@ -273,7 +273,7 @@ impl Trainer {
         let start = Instant::now();
         let first = self.step;
         let bar = if progress {
-            ProgressBar::new(total as u64)
+            gb_core::progress::bar(total as u64)
         } else {
             ProgressBar::hidden()
         };

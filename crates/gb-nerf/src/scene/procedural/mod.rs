@@ -156,8 +156,8 @@ pub fn generate(opts: &ProceduralOptions) -> Result<GeneratedScene, SceneError> 
     opts.validate()?;
     let spec = scenes::build(opts.name, opts.seed);
     let cams = cameras_in_file_order(opts, &spec);
-    let bar = indicatif::ProgressBar::new(cams.len() as u64)
-        .with_message(format!("rendering {}", opts.name));
+    let bar =
+        gb_core::progress::bar(cams.len() as u64).with_message(format!("rendering {}", opts.name));
     let mut views = Vec::with_capacity(cams.len());
     for (i, (camera, split)) in cams.into_iter().enumerate() {
         let render = render::render(&spec.world, &camera, split == Split::Train);
