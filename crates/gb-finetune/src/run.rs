@@ -3,12 +3,17 @@
 //!
 //! Files under the output folder:
 //! - `checkpoint.gbft`: the latest checkpoint ([`crate::train::checkpoint`]); `resume`
-//!   continues from it exactly;
+//!   continues from it exactly: a run killed after a checkpoint and resumed writes the same
+//!   adapters bit for bit, and the same `train_log.jsonl` and `validation.jsonl`, as an
+//!   uninterrupted one;
 //! - `config.toml`: the resolved recipe;
 //! - `train_log.jsonl`: one `{"step", "loss"}` line per completed step (rewritten at each
 //!   checkpoint, so it always matches the checkpoint);
 //! - `validation.jsonl`: one line per validation pass, `{"step", "report"}`; step 0 is the
-//!   base prior without any update;
+//!   base prior without any update. A fresh run starts the file anew; a resumed run drops
+//!   the lines after its checkpoint's step (a validation pass runs before the checkpoint of
+//!   its step, so the lines up to it are complete); the reports of the summary (base and
+//!   final) are kept in the checkpoint, floats as bits, so a resumed run prints them too;
 //! - LoRA runs: `pytorch_lora_weights.safetensors` (diffusers/PEFT format);
 //!   full runs: `prior/`, a diffusers inpainting folder.
 
@@ -21,6 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::masks::MaskConfig;
 use crate::sample::PairSource;
+use crate::train::checkpoint::{exact_floats, from_exact_floats};
 use crate::train::validate::{sampling_prior, validate, ValidationReport, ValidationSettings};
 use crate::train::{FinetuneConfig, FinetuneTrainer, PriorModels, TrainTarget};
 use crate::FinetuneError;
@@ -79,6 +85,72 @@ fn write_log(out: &Path, losses: &[f64]) -> Result<(), FinetuneError> {
     gb_core::write_atomic(&path, text.as_bytes()).map_err(|e| FinetuneError::io(&path, e))
 }
 
+/// Keeps the lines of `validation.jsonl` up to `step` (module docs).
+fn validation_up_to(out: &Path, step: usize) -> Result<(), FinetuneError> {
+    let path = out.join("validation.jsonl");
+    let text = match std::fs::read_to_string(&path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(FinetuneError::io(&path, e)),
+    };
+    let mut kept = String::new();
+    for line in text.lines() {
+        let earlier = serde_json::from_str::<serde_json::Value>(line)
+            .ok()
+            .and_then(|v| v.get("step").and_then(|s| s.as_u64()))
+            .is_some_and(|s| s as usize <= step);
+        if earlier {
+            kept.push_str(line);
+            kept.push('\n');
+        }
+    }
+    if kept.len() != text.len() {
+        gb_core::write_atomic(&path, kept.as_bytes()).map_err(|e| FinetuneError::io(&path, e))?;
+    }
+    Ok(())
+}
+
+/// The validation reports of a run by step, kept in its checkpoints (floats as bits, see
+/// [`crate::train::checkpoint::exact_floats`]) so that a resumed run's summary has the
+/// base and final reports an uninterrupted run's has.
+#[derive(Debug, Clone, Default)]
+struct Validations(Vec<(usize, ValidationReport)>);
+
+impl Validations {
+    fn of(&self, step: usize) -> Option<ValidationReport> {
+        self.0
+            .iter()
+            .find(|(s, _)| *s == step)
+            .map(|(_, r)| r.clone())
+    }
+
+    fn to_checkpoint(&self) -> serde_json::Value {
+        let reports: Vec<serde_json::Value> = self
+            .0
+            .iter()
+            .map(|(s, r)| {
+                let r = serde_json::to_value(r).unwrap_or_default();
+                serde_json::json!({"step": s, "report": exact_floats(r)})
+            })
+            .collect();
+        serde_json::json!({ "validations": reports })
+    }
+
+    fn from_checkpoint(extra: &serde_json::Value) -> Self {
+        let reports = extra["validations"].as_array().cloned().unwrap_or_default();
+        Self(
+            reports
+                .into_iter()
+                .filter_map(|v| {
+                    let step = v["step"].as_u64()? as usize;
+                    let report = serde_json::from_value(from_exact_floats(v["report"].clone()));
+                    Some((step, report.ok()?))
+                })
+                .collect(),
+        )
+    }
+}
+
 fn append_validation(
     out: &Path,
     step: usize,
@@ -127,16 +199,28 @@ pub fn run_finetune(
     std::fs::create_dir_all(&opts.out).map_err(|e| FinetuneError::io(&opts.out, e))?;
     let ckpt = checkpoint_path(&opts.out);
     let settings = validation_settings(&config);
-    let mut validation_base = None;
-    if let (Some(v), false) = (val, opts.resume && ckpt.is_file()) {
+    let mut reports = Validations::default();
+    let resuming = opts.resume && ckpt.is_file();
+    if !resuming {
+        let path = opts.out.join("validation.jsonl");
+        match std::fs::remove_file(&path) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(FinetuneError::io(&path, e))
+            }
+            _ => {}
+        }
+    }
+    if let (Some(v), false) = (val, resuming) {
         let prior = sampling_prior(&models, &models.trainable, plain);
         let report = validate(&prior, v, &settings)?;
         tracing::info!(?report, "validation of the base prior (step 0)");
         append_validation(&opts.out, 0, &report)?;
-        validation_base = Some(report);
+        reports.0.push((0, report));
     }
-    let mut trainer = if opts.resume && ckpt.is_file() {
-        let mut t = FinetuneTrainer::resume(models, &ckpt, device)?;
+    let mut trainer = if resuming {
+        let (mut t, extra) = FinetuneTrainer::resume_with_extra(models, &ckpt, device)?;
+        validation_up_to(&opts.out, t.step)?;
+        reports = Validations::from_checkpoint(&extra);
         // `steps` and the checkpoint / validation cadence may change on resume (to extend a
         // run); any other difference would break the exact continuation, so the
         // checkpoint's recipe wins.
@@ -181,26 +265,25 @@ pub fn run_finetune(
     };
     let start = std::time::Instant::now();
     let first = trainer.step;
-    let mut validation_final = None;
     while trainer.step < cfg.steps {
         let s = trainer.train_step(train)?;
         bar.set_position(s.step as u64);
         bar.set_message(format!("loss {:.4} |g| {:.3}", s.loss, s.grad_norm));
         let last = s.step == cfg.steps;
-        if last || (cfg.checkpoint_every > 0 && s.step % cfg.checkpoint_every == 0) {
-            trainer.save_checkpoint(&ckpt)?;
-            write_log(&opts.out, &trainer.losses)?;
-        }
+        // validation first: a checkpoint of step s implies that its validation line is
+        // written, so a resumed run neither repeats nor misses one
         if let Some(v) = val {
             if last || (cfg.validate_every > 0 && s.step % cfg.validate_every == 0) {
                 let prior = sampling_prior(&trainer.models, &trainer.models.trainable, plain);
                 let report = validate(&prior, v, &settings)?;
                 tracing::info!(step = s.step, ?report, "validation");
                 append_validation(&opts.out, s.step, &report)?;
-                if last {
-                    validation_final = Some(report);
-                }
+                reports.0.push((s.step, report));
             }
+        }
+        if last || (cfg.checkpoint_every > 0 && s.step % cfg.checkpoint_every == 0) {
+            trainer.save_checkpoint_with(&ckpt, reports.to_checkpoint())?;
+            write_log(&opts.out, &trainer.losses)?;
         }
     }
     bar.finish_and_clear();
@@ -232,8 +315,8 @@ pub fn run_finetune(
         loss_end: mean(&trainer.losses[n.saturating_sub(k)..]),
         train_seconds: secs,
         steps_per_second: if secs > 0.0 { done as f64 / secs } else { 0.0 },
-        validation_base,
-        validation_final,
+        validation_base: reports.of(0),
+        validation_final: reports.of(trainer.step).filter(|_| trainer.step > 0),
         export,
     })
 }

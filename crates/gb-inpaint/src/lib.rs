@@ -14,6 +14,8 @@
 //! - [`guidance`]: one guidance term injected as `lambda * s(t) * (z * g.detach()).sum()`;
 //! - [`trainer`]: the guided trainer (one backward per step, NaN policy, checkpoints,
 //!   resume, `train_log.jsonl`);
+//! - [`resume`]: what a checkpoint keeps for an exact resume besides the reconstruction
+//!   (run identity, counters, visibility maps);
 //! - [`pre_inpainted`]: the SPIn-NeRF + LaMa baseline's inputs;
 //! - [`metrics`]: every `gb_eval` metric that applies to a run's test views;
 //! - [`report`], [`svg`], [`gif`]: the run's `report.html`, its SVG charts (a small writer of
@@ -34,6 +36,7 @@ pub mod metrics;
 pub mod pre_inpainted;
 pub mod prior;
 pub mod report;
+pub mod resume;
 pub mod svg;
 pub mod trainer;
 pub mod visibility;

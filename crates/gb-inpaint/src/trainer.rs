@@ -26,12 +26,14 @@
 //! checkpoint written while the losses were finite. Checkpoints are only written after a
 //! finite step.
 //!
-//! **Determinism and resume**: the ray batches use gb-nerf's stream (`seed`, reseeded with
-//! `seed + step` on resume); the guidance view, timestep and noise of a step come from seeds
-//! derived from `(seed, step, modality)`, and the annealed timestep schedule from the number
-//! of earlier guided steps, so a resumed run draws the same guidance as an uninterrupted
-//! one. Checkpoints are gb-nerf's format (`gb_nerf::train::checkpoint`), so `--prior none`
-//! and guided runs can resume each other's checkpoints.
+//! **Determinism and an exact resume**: the ray batches, jitter and occupancy updates use
+//! gb-nerf's stream, whose exact position the checkpoint stores; the guidance view, timestep
+//! and noise of a step come from seeds derived from `(seed, step, modality)`, and the
+//! annealed timestep schedule from the number of earlier guided steps. Checkpoints are
+//! gb-nerf's format (`gb_nerf::train::checkpoint`) with the guided trainer's own state in
+//! it ([`crate::resume`]: the run's identity, its counters and the visibility maps), so a run
+//! killed after a checkpoint and resumed continues bit for bit as the uninterrupted run
+//! would, and the log is cut back to the checkpoint's step before the resumed run appends.
 
 use std::collections::HashMap;
 use std::io::Write;
@@ -61,7 +63,9 @@ use crate::error::InpaintError;
 use crate::guidance::{distiller_for, guidance_term, Modality, TermConditioning, TermOutput};
 use crate::method::{MethodConfig, Prompts};
 use crate::prior::GuidancePrior;
+use crate::resume::{self, GuidedState, RunTotals, SavedMap};
 use crate::visibility::{gate_gradient, ObservedMap};
+use gb_nerf::train::checkpoint::{self, CheckpointParts};
 
 /// The guidance of a run: the prior, the resolved prompts and their embeddings, and the
 /// per-view crop constants (computed on first use).
@@ -163,12 +167,15 @@ pub struct StepRecord {
     pub guidance: Vec<TermRecord>,
 }
 
-/// Summary of a [`GuidedTrainer::fit`] call.
+/// Summary of a [`GuidedTrainer::fit`] call: `steps_run` and `seconds` count this call
+/// only; every other field covers the whole run (a resumed run includes the steps before its
+/// checkpoint, restored from it), so that a resumed run reports what an uninterrupted one
+/// does.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct FitSummary {
     /// Steps run in this call.
     pub steps_run: usize,
-    /// Wall time, s.
+    /// Wall time of this call, s.
     pub seconds: f64,
     /// Steps skipped for a non-finite loss.
     pub skipped_steps: usize,
@@ -180,7 +187,7 @@ pub struct FitSummary {
     pub unguided_steps: usize,
     /// Total wall time of the unguided steps, s.
     pub unguided_seconds: f64,
-    /// U-Net calls in this call.
+    /// U-Net calls.
     pub unet_calls: usize,
     /// Mean field evaluations per ray of the ray batches.
     pub mean_evaluations_per_ray: f32,
@@ -208,6 +215,10 @@ pub struct GuidedTrainer {
     pub method: MethodConfig,
     /// The guidance (`None` for methods without a prior).
     pub guidance: Option<GuidanceState>,
+    /// Counters of the whole run (restored on resume).
+    pub totals: RunTotals,
+    /// The run's identity ([`resume::identity`]), stored in checkpoints.
+    identity: toml::Value,
     nan_streak: usize,
     last_good_checkpoint: Option<(PathBuf, usize)>,
 }
@@ -327,9 +338,10 @@ impl GuidedTrainer {
         )
     }
 
-    /// Restores a trainer from a gb-nerf checkpoint of the same scene (parameters, Adam
-    /// state, occupancy grid, step); the preset stored in the checkpoint is used, with
-    /// `steps` overriding its step count when given.
+    /// Restores a trainer from a checkpoint of the same scene (parameters, Adam state,
+    /// occupancy grid, step, random stream, counters, visibility maps); the preset stored in
+    /// the checkpoint is used, with `steps` overriding its step count when given. Refuses a
+    /// checkpoint of another method (by name); [`Self::resume_matching`] checks everything.
     pub fn resume(
         scene: &Scene,
         path: &Path,
@@ -338,13 +350,105 @@ impl GuidedTrainer {
         backend: BackendKind,
         steps: Option<usize>,
     ) -> Result<Self, InpaintError> {
-        let mut nerf = Trainer::resume(scene, path, backend)?;
+        let parts = checkpoint::load(path)?;
+        let mut config = parts.meta.config(path)?;
         if let Some(s) = steps {
-            nerf.config.train.steps = s;
+            config.train.steps = s;
         }
+        Self::resume_parts(scene, path, parts, config, method, guidance, backend, false)
+    }
+
+    /// The strict resume of `cargo xtask inpaint --resume`: like [`Self::resume`], training
+    /// with `config`, but a checkpoint written with another preset (any field but
+    /// `train.steps` and `train.checkpoint_every`), method, prompts or prior is refused with
+    /// one line naming the file and the first field that differs.
+    pub fn resume_matching(
+        scene: &Scene,
+        path: &Path,
+        method: MethodConfig,
+        guidance: Option<(GuidancePrior, Prompts)>,
+        backend: BackendKind,
+        config: NerfConfig,
+    ) -> Result<Self, InpaintError> {
+        let parts = checkpoint::load(path)?;
+        resume::check_preset(path, &parts.meta.config(path)?, &config)?;
+        Self::resume_parts(scene, path, parts, config, method, guidance, backend, true)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn resume_parts(
+        scene: &Scene,
+        path: &Path,
+        mut parts: CheckpointParts,
+        config: NerfConfig,
+        method: MethodConfig,
+        guidance: Option<(GuidancePrior, Prompts)>,
+        backend: BackendKind,
+        strict: bool,
+    ) -> Result<Self, InpaintError> {
+        let bad = |reason: String| gb_nerf::train::NerfError::Checkpoint {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let extra = std::mem::take(&mut parts.meta.extra);
+        let state: Option<GuidedState> = if extra.is_null() {
+            None
+        } else {
+            Some(serde_json::from_value(extra).map_err(|e| bad(format!("guided state: {e}")))?)
+        };
+        let identity = resume::identity(
+            &method,
+            guidance.as_ref().map(|(p, prompts)| (&p.info, prompts)),
+        )
+        .map_err(|e| bad(format!("run identity: {e}")))?;
+        match &state {
+            Some(st) => resume::check_identity(path, &st.identity_toml, &identity, strict)?,
+            None if strict => {
+                return Err(bad(
+                    "written by the plain reconstruction trainer: it has no guided-run state \
+                     (method, counters)"
+                        .into(),
+                )
+                .into())
+            }
+            None => {}
+        }
+        let nerf = Trainer::resume_from(scene, path, parts, config, backend)?;
         let mut t = Self::from_base(nerf, scene, method, guidance)?;
+        if let Some(st) = state {
+            t.totals = st.totals;
+            if let Some(g) = t.guidance.as_mut() {
+                g.visibility = st.visibility.iter().map(SavedMap::to_map).collect();
+            }
+        }
         t.last_good_checkpoint = Some((path.to_path_buf(), t.nerf.step));
         Ok(t)
+    }
+
+    /// The guided trainer's state for a checkpoint ([`crate::resume`]).
+    fn checkpoint_state(&self) -> Result<serde_json::Value, InpaintError> {
+        let mut visibility: Vec<SavedMap> = self
+            .guidance
+            .as_ref()
+            .map(|g| {
+                g.visibility
+                    .iter()
+                    .map(|(v, m)| SavedMap::new(*v, m))
+                    .collect()
+            })
+            .unwrap_or_default();
+        visibility.sort_by_key(|m| m.view);
+        let state = GuidedState {
+            identity_toml: toml::to_string(&self.identity).unwrap_or_default(),
+            totals: self.totals.clone(),
+            visibility,
+        };
+        serde_json::to_value(&state).map_err(|e| {
+            InpaintError::Nerf(gb_nerf::train::NerfError::Checkpoint {
+                path: PathBuf::from("(guided state)"),
+                reason: e.to_string(),
+            })
+        })
     }
 
     fn from_base(
@@ -353,6 +457,14 @@ impl GuidedTrainer {
         method: MethodConfig,
         guidance: Option<(GuidancePrior, Prompts)>,
     ) -> Result<Self, InpaintError> {
+        let identity = resume::identity(
+            &method,
+            guidance.as_ref().map(|(p, prompts)| (&p.info, prompts)),
+        )
+        .map_err(|e| InpaintError::MethodConfig {
+            path: PathBuf::from(&method.name),
+            reason: e,
+        })?;
         let guidance = match (method.needs_prior(), guidance) {
             (true, Some((prior, prompts))) => Some(GuidanceState::new(
                 &method,
@@ -373,6 +485,8 @@ impl GuidedTrainer {
             nerf,
             method,
             guidance,
+            totals: RunTotals::default(),
+            identity,
             nan_streak: 0,
             last_good_checkpoint: None,
         })
@@ -759,6 +873,10 @@ impl GuidedTrainer {
                 if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
                     std::fs::create_dir_all(dir).map_err(|e| InpaintError::io(dir, e))?;
                 }
+                if opts.append_log {
+                    resume::truncate_log(path, self.nerf.step)
+                        .map_err(|e| InpaintError::io(path, e))?;
+                }
                 let file = std::fs::OpenOptions::new()
                     .create(true)
                     .write(true)
@@ -770,21 +888,20 @@ impl GuidedTrainer {
             }
             None => None,
         };
-        let mut summary = FitSummary::default();
-        let mut evals = 0.0f64;
         while self.nerf.step < total {
             let rec = self.train_step()?;
-            evals += rec.evaluations_per_ray as f64;
+            let totals = &mut self.totals;
+            totals.evaluations_per_ray_sum += rec.evaluations_per_ray as f64;
             if rec.skipped {
-                summary.skipped_steps += 1;
+                totals.skipped_steps += 1;
             }
             if rec.guidance.is_empty() {
-                summary.unguided_steps += 1;
-                summary.unguided_seconds += rec.seconds;
+                totals.unguided_steps += 1;
+                totals.unguided_seconds += rec.seconds;
             } else {
-                summary.guided_steps += 1;
-                summary.guided_seconds += rec.seconds;
-                summary.unet_calls += rec.guidance.iter().map(|g| g.unet_calls).sum::<usize>();
+                totals.guided_steps += 1;
+                totals.guided_seconds += rec.seconds;
+                totals.unet_calls += rec.guidance.iter().map(|g| g.unet_calls).sum::<usize>();
             }
             if let Some((path, w)) = log.as_mut() {
                 let line = serde_json::to_string(&rec).unwrap_or_default();
@@ -817,18 +934,29 @@ impl GuidedTrainer {
                 let due =
                     (every > 0 && self.nerf.step.is_multiple_of(every)) || self.nerf.step == total;
                 if due && self.nan_streak == 0 {
-                    self.save_checkpoint(path)?;
+                    let state = self.checkpoint_state()?;
+                    self.nerf.save_checkpoint_with(path, state)?;
                     self.last_good_checkpoint = Some((path.clone(), self.nerf.step));
                 }
             }
         }
         bar.finish();
-        summary.steps_run = self.nerf.step - first;
-        summary.seconds = start.elapsed().as_secs_f64();
-        summary.mean_evaluations_per_ray = if summary.steps_run > 0 {
-            (evals / summary.steps_run as f64) as f32
-        } else {
-            0.0
+        let t = &self.totals;
+        let counted = t.guided_steps + t.unguided_steps;
+        let summary = FitSummary {
+            steps_run: self.nerf.step - first,
+            seconds: start.elapsed().as_secs_f64(),
+            skipped_steps: t.skipped_steps,
+            guided_steps: t.guided_steps,
+            guided_seconds: t.guided_seconds,
+            unguided_steps: t.unguided_steps,
+            unguided_seconds: t.unguided_seconds,
+            unet_calls: t.unet_calls,
+            mean_evaluations_per_ray: if counted > 0 {
+                (t.evaluations_per_ray_sum / counted as f64) as f32
+            } else {
+                0.0
+            },
         };
         tracing::info!(
             steps_run = summary.steps_run,

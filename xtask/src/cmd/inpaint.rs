@@ -29,7 +29,10 @@
 //! - `scene/` (only without `--scene`): the generated procedural `stairs` scene;
 //! - `config.toml`: the resolved run (command to reproduce it, prior, LoRA, prompts, preset,
 //!   method);
-//! - `checkpoint.bin`: the atomic training checkpoint (`--resume` continues from it);
+//! - `checkpoint.bin`: the atomic training checkpoint; `--resume` continues from it exactly
+//!   (the resumed run's `metrics.json` equals an uninterrupted run's but for wall times),
+//!   refuses one of another preset, method, prompts or prior (exit 2, naming the field;
+//!   `--steps` may grow), and without one starts afresh with a warning;
 //! - `train_log.jsonl`: one line per step (loss, PSNR, learning rate, skipped, and per
 //!   guidance term: t, w(t), lambda * s(t), latent gradient norm, U-Net calls and batch, rays,
 //!   time);
@@ -333,17 +336,16 @@ pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
     })?;
     let ckpt = args.out.join("checkpoint.bin");
     let resuming = args.resume && ckpt.is_file();
+    if args.resume && !resuming {
+        tracing::warn!(
+            "--resume: no checkpoint at {}, so the run starts afresh",
+            ckpt.display()
+        );
+    }
     let guidance = prior.map(|p| (p, prompts.clone()));
     let mut trainer = if resuming {
         tracing::info!(path = %ckpt.display(), "resuming");
-        GuidedTrainer::resume(
-            &scene,
-            &ckpt,
-            method.clone(),
-            guidance,
-            device,
-            Some(config.train.steps),
-        )?
+        GuidedTrainer::resume_matching(&scene, &ckpt, method.clone(), guidance, device, config)?
     } else {
         GuidedTrainer::new(&scene, config, method.clone(), guidance, device)?
     };
@@ -494,8 +496,9 @@ pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
         "report": "report.html",
         "notes": "PSNR/SSIM: gb_eval (scikit-image conventions) on [0,1] RGB; *_bbox over the \
                   test view's mask bounding box; d_psnr: PSNR of 8-bit max-normalised disparity \
-                  (gb_eval::disparity); infinite values are written as null; guidance timings \
-                  are this run's wall time per step (train_log.jsonl has every step); `eval`: \
+                  (gb_eval::disparity); infinite values are written as null; guidance counts \
+                  and timings (wall time per step) cover the whole run, a resumed run's steps \
+                  before its checkpoint included (train_log.jsonl has every step); `eval`: \
                   every gb-eval metric that applies (cargo xtask eval's keys and JSON: _bbox, \
                   _mask regions, lpips = ST-LPIPS, fid / d_fid, brisque, nima), unavailable ones \
                   null with the reason under eval.unavailable; a scene without test views is \

@@ -1,9 +1,18 @@
 //! Fine-tuning checkpoints: one file written atomically (temporary file + rename).
 //!
-//! Layout: the magic `GBFTCK1\n`, then three sections, each a little-endian `u64` length
+//! A checkpoint holds everything a run carries from one step to the next, so that a run
+//! killed after it and resumed writes the same adapters bit for bit: the trainable module, the
+//! AdamW state, the step, the loss log, the count of consecutive non-finite steps, and the
+//! recipe as TOML text (whose floats round-trip exactly, unlike serde_json's default
+//! parser). The random streams need no state: the batch of step `s` is drawn from a stream
+//! that is a pure function of `(seed, s, micro-batch)` ([`super::batch::stream`]), and the
+//! validation's holes and noise from fixed seeds.
+//!
+//! Layout (version 2): the magic `GBFTCK2\n`, then three sections, each a little-endian `u64` length
 //! followed by its bytes: JSON metadata ([`CheckpointMeta`]), the trainable module's record
 //! (burnpack bytes of `Module::into_record`, LoRA factors included, parameter ids kept so
-//! that the optimiser state maps back), and the AdamW state (burnpack bytes).
+//! that the optimiser state maps back), and the AdamW state (burnpack bytes). A version-1
+//! file (`GBFTCK1`) is refused with a one-line error naming it.
 
 use std::path::Path;
 
@@ -12,18 +21,73 @@ use serde::{Deserialize, Serialize};
 use super::FinetuneConfig;
 use crate::FinetuneError;
 
-const MAGIC: &[u8] = b"GBFTCK1\n";
+const MAGIC: &[u8] = b"GBFTCK2\n";
+/// Magics of older versions, refused by name.
+const OLD_MAGICS: &[&[u8]] = &[b"GBFTCK1\n"];
 
 /// Metadata of a checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CheckpointMeta {
     /// Optimiser steps completed.
     pub step: usize,
-    /// The recipe trained with.
-    pub config: FinetuneConfig,
+    /// The recipe trained with, as TOML (exact floats; [`CheckpointMeta::config`]).
+    pub config_toml: String,
+    /// The caller's own state (`null` when none; [`crate::run`] keeps its validation
+    /// reports here, floats through [`exact_floats`]).
+    #[serde(default)]
+    pub extra: serde_json::Value,
+    /// Consecutive non-finite steps before this checkpoint (the run stops at
+    /// [`super::trainer::MAX_NAN_STEPS`]).
+    pub nan_streak: usize,
     /// Loss of every completed step (for the training log), as `f64::to_bits`: a JSON
     /// decimal does not round-trip exactly through serde_json's default float parser.
     pub loss_bits: Vec<u64>,
+}
+
+impl CheckpointMeta {
+    /// The recipe, parsed from [`Self::config_toml`]; `path` names the checkpoint in errors.
+    pub fn config(&self, path: &Path) -> Result<FinetuneConfig, FinetuneError> {
+        toml::from_str(&self.config_toml).map_err(|e| invalid(path, format!("config: {e}")))
+    }
+}
+
+/// `v` with every float written as `{"f64_bits": u64}`: a JSON value that comes back exactly
+/// through serde_json's default parser, which reads some decimals one ulp off.
+pub fn exact_floats(v: serde_json::Value) -> serde_json::Value {
+    use serde_json::Value;
+    match v {
+        Value::Number(n) if n.is_f64() => {
+            serde_json::json!({ "f64_bits": n.as_f64().unwrap_or(f64::NAN).to_bits() })
+        }
+        Value::Array(a) => Value::Array(a.into_iter().map(exact_floats).collect()),
+        Value::Object(m) => {
+            Value::Object(m.into_iter().map(|(k, v)| (k, exact_floats(v))).collect())
+        }
+        other => other,
+    }
+}
+
+/// The inverse of [`exact_floats`].
+pub fn from_exact_floats(v: serde_json::Value) -> serde_json::Value {
+    use serde_json::Value;
+    match v {
+        Value::Object(m) if m.len() == 1 && m.contains_key("f64_bits") => m["f64_bits"]
+            .as_u64()
+            .and_then(|b| serde_json::Number::from_f64(f64::from_bits(b)))
+            .map_or(Value::Null, Value::Number),
+        Value::Array(a) => Value::Array(a.into_iter().map(from_exact_floats).collect()),
+        Value::Object(m) => Value::Object(
+            m.into_iter()
+                .map(|(k, v)| (k, from_exact_floats(v)))
+                .collect(),
+        ),
+        other => other,
+    }
+}
+
+/// The recipe as TOML text (exact floats).
+pub fn config_to_toml(config: &FinetuneConfig, path: &Path) -> Result<String, FinetuneError> {
+    toml::to_string(config).map_err(|e| invalid(path, format!("config: {e}")))
 }
 
 /// The parts of a checkpoint.
@@ -58,6 +122,17 @@ pub fn save(path: &Path, parts: &CheckpointParts) -> Result<(), FinetuneError> {
 /// Reads a checkpoint written by [`save`].
 pub fn load(path: &Path) -> Result<CheckpointParts, FinetuneError> {
     let bytes = std::fs::read(path).map_err(|e| FinetuneError::io(path, e))?;
+    if let Some(old) = OLD_MAGICS.iter().find(|m| bytes.starts_with(m)) {
+        return Err(invalid(
+            path,
+            format!(
+                "written by an older version ({}) that cannot resume exactly; this version \
+                 reads {}: start the run afresh (without --resume, or delete the file)",
+                String::from_utf8_lossy(old).trim(),
+                String::from_utf8_lossy(MAGIC).trim()
+            ),
+        ));
+    }
     if !bytes.starts_with(MAGIC) {
         return Err(invalid(path, "not a gb-finetune checkpoint (bad magic)"));
     }
@@ -85,4 +160,46 @@ pub fn load(path: &Path) -> Result<CheckpointParts, FinetuneError> {
         model,
         optimizer,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn config_round_trips_exactly_and_old_files_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("checkpoint.gbft");
+        let config = FinetuneConfig {
+            lr: 1.0 / 3.0 * 1e-4,
+            alpha: 0.1 + 0.2,
+            ..FinetuneConfig::default()
+        };
+        let parts = CheckpointParts {
+            meta: CheckpointMeta {
+                step: 3,
+                config_toml: config_to_toml(&config, &path).unwrap(),
+                nan_streak: 1,
+                loss_bits: vec![0.5f64.to_bits()],
+                extra: serde_json::Value::Null,
+            },
+            model: vec![1, 2, 3],
+            optimizer: vec![4],
+        };
+        save(&path, &parts).unwrap();
+        let back = load(&path).unwrap();
+        assert_eq!(back, parts);
+        assert_eq!(back.meta.config(&path).unwrap(), config);
+        let value = serde_json::json!({"a": [13.558149127696177, 1, null], "b": {"c": 0.1}});
+        let text = serde_json::to_string(&exact_floats(value.clone())).unwrap();
+        let back = from_exact_floats(serde_json::from_str(&text).unwrap());
+        assert_eq!(back, value);
+        std::fs::write(&path, b"GBFTCK1\n\x00").unwrap();
+        let e = load(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("checkpoint.gbft") && e.contains("GBFTCK1"),
+            "{e}"
+        );
+        assert_eq!(e.lines().count(), 1, "{e}");
+    }
 }

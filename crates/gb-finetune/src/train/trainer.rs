@@ -196,8 +196,19 @@ impl FinetuneTrainer {
         })
     }
 
-    /// Writes a checkpoint atomically (module record with ids, AdamW state, step, losses).
+    /// Writes a checkpoint atomically (module record with ids, AdamW state, step, losses,
+    /// non-finite streak, recipe; [`checkpoint`]).
     pub fn save_checkpoint(&self, path: &Path) -> Result<(), FinetuneError> {
+        self.save_checkpoint_with(path, serde_json::Value::Null)
+    }
+
+    /// [`Self::save_checkpoint`] with the caller's own state `extra` (read back by
+    /// [`Self::resume_with_extra`]).
+    pub fn save_checkpoint_with(
+        &self,
+        path: &Path,
+        extra: serde_json::Value,
+    ) -> Result<(), FinetuneError> {
         let bad = |m: String| FinetuneError::Invalid {
             path: path.to_path_buf(),
             message: m,
@@ -218,7 +229,9 @@ impl FinetuneTrainer {
             &CheckpointParts {
                 meta: CheckpointMeta {
                     step: self.step,
-                    config: self.config.clone(),
+                    config_toml: checkpoint::config_to_toml(&self.config, path)?,
+                    nan_streak: self.nan_streak,
+                    extra,
                     loss_bits: self.losses.iter().map(|l| l.to_bits()).collect(),
                 },
                 model: model.to_vec(),
@@ -228,19 +241,31 @@ impl FinetuneTrainer {
     }
 
     /// Continues a run from a checkpoint: `models` must be the same base prior (loaded
-    /// fresh); the adapters, the optimiser state, the step and the loss log are restored,
-    /// and the random stream of the next step is the one an uninterrupted run would draw.
+    /// fresh); the adapters, the optimiser state, the step, the loss log and the non-finite
+    /// streak are restored, and the random stream of the next step is the one an
+    /// uninterrupted run would draw (a pure function of the seed and the step).
     pub fn resume(
         models: PriorModels,
         path: &Path,
         device: &Device,
     ) -> Result<Self, FinetuneError> {
-        let parts = checkpoint::load(path)?;
+        Self::resume_with_extra(models, path, device).map(|(t, _)| t)
+    }
+
+    /// [`Self::resume`], also returning the caller's state saved with
+    /// [`Self::save_checkpoint_with`] (`null` when none).
+    pub fn resume_with_extra(
+        models: PriorModels,
+        path: &Path,
+        device: &Device,
+    ) -> Result<(Self, serde_json::Value), FinetuneError> {
+        let mut parts = checkpoint::load(path)?;
+        let extra = std::mem::take(&mut parts.meta.extra);
         let bad = |m: String| FinetuneError::Invalid {
             path: path.to_path_buf(),
             message: m,
         };
-        let mut t = Self::new(models, parts.meta.config.clone(), device)?;
+        let mut t = Self::new(models, parts.meta.config(path)?, device)?;
         let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(parts.model))
             .map_err(|e| bad(format!("model record: {e}")))?;
         t.models.trainable = t
@@ -253,13 +278,14 @@ impl FinetuneTrainer {
             .from_bytes(Bytes::from_bytes_vec(parts.optimizer))
             .map_err(|e| bad(format!("optimizer record: {e}")))?;
         t.step = parts.meta.step;
+        t.nan_streak = parts.meta.nan_streak;
         t.losses = parts
             .meta
             .loss_bits
             .iter()
             .map(|b| f64::from_bits(*b))
             .collect();
-        Ok(t)
+        Ok((t, extra))
     }
 
     /// Writes the adapters as a diffusers/PEFT LoRA file (`unet.*` and `text_encoder.*`

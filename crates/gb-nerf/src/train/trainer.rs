@@ -14,7 +14,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::checkpoint::{self, CheckpointMeta, CheckpointParts};
+use super::checkpoint::{self, CheckpointMeta, CheckpointParts, RngState};
 use super::data::TrainData;
 use super::losses::{disparity_loss, distortion_loss, mse, psnr_from_mse};
 use super::{NerfConfig, NerfError};
@@ -84,6 +84,8 @@ pub struct Trainer {
     optimizer: ModuleOptimizer,
     rng: ChaCha8Rng,
     has_depth: bool,
+    scene: String,
+    data_fingerprint: u64,
 }
 
 impl Trainer {
@@ -101,6 +103,7 @@ impl Trainer {
         let field = config.field.init(&device);
         let space = SceneSpace::from_scene(scene);
         let has_depth = data.views.iter().any(|v| v.depth.is_some());
+        let data_fingerprint = checkpoint::data_fingerprint(&data);
         let mut trainer = Self {
             data,
             space,
@@ -117,6 +120,8 @@ impl Trainer {
             optimizer: AdamConfig::new().with_epsilon(1e-15).init(),
             rng: ChaCha8Rng::seed_from_u64(config.train.seed),
             has_depth,
+            scene: scene.name.clone(),
+            data_fingerprint,
             config,
         };
         if let Some(occ) = trainer.config.sampler.occupancy.clone() {
@@ -325,8 +330,18 @@ impl Trainer {
         })
     }
 
-    /// Writes a checkpoint atomically.
+    /// Writes a checkpoint atomically (module docs of [`checkpoint`]).
     pub fn save_checkpoint(&self, path: &Path) -> Result<(), NerfError> {
+        self.save_checkpoint_with(path, serde_json::Value::Null)
+    }
+
+    /// Writes a checkpoint atomically with the caller's own state `extra` (read back with
+    /// [`checkpoint::load`]: `meta.extra`).
+    pub fn save_checkpoint_with(
+        &self,
+        path: &Path,
+        extra: serde_json::Value,
+    ) -> Result<(), NerfError> {
         let e = |r: String| NerfError::Checkpoint {
             path: path.to_path_buf(),
             reason: r,
@@ -343,8 +358,15 @@ impl Trainer {
             &CheckpointParts {
                 meta: CheckpointMeta {
                     step: self.step,
-                    config: self.config.clone(),
-                    occupancy_threshold: self.occupancy.as_ref().map(|g| g.density_threshold),
+                    config_toml: checkpoint::config_to_toml(&self.config, path)?,
+                    scene: self.scene.clone(),
+                    data_fingerprint: format!("{:016x}", self.data_fingerprint),
+                    rng: RngState::of(&self.rng),
+                    occupancy_threshold_bits: self
+                        .occupancy
+                        .as_ref()
+                        .map(|g| g.density_threshold.to_bits()),
+                    extra,
                 },
                 model: model.to_vec(),
                 optimizer: optimizer.to_vec(),
@@ -353,19 +375,48 @@ impl Trainer {
                     .as_ref()
                     .map(|g| g.density.clone())
                     .unwrap_or_default(),
+                occupied: self
+                    .occupancy
+                    .as_ref()
+                    .map(|g| g.occupied.clone())
+                    .unwrap_or_default(),
             },
         )
     }
 
     /// Restores a trainer from a checkpoint of the same scene: parameters, optimiser state,
-    /// occupancy grid and step. The random stream restarts from `seed + step`.
+    /// occupancy grid, step and the exact position of the random stream, so that it
+    /// continues as the uninterrupted run would. Errors (naming the file) when the
+    /// checkpoint was written for other training data.
     pub fn resume(scene: &Scene, path: &Path, backend: BackendKind) -> Result<Self, NerfError> {
         let parts = checkpoint::load(path)?;
+        let config = parts.meta.config(path)?;
+        Self::resume_from(scene, path, parts, config, backend)
+    }
+
+    /// [`Self::resume`] from checkpoint parts already read from `path`, training with
+    /// `config` (the caller has checked that it matches the checkpoint's wherever that
+    /// matters; the step count may differ).
+    pub fn resume_from(
+        scene: &Scene,
+        path: &Path,
+        parts: CheckpointParts,
+        config: NerfConfig,
+        backend: BackendKind,
+    ) -> Result<Self, NerfError> {
         let e = |r: String| NerfError::Checkpoint {
             path: path.to_path_buf(),
             reason: r,
         };
-        let mut t = Self::new(scene, parts.meta.config.clone(), backend)?;
+        let mut t = Self::new(scene, config, backend)?;
+        let fingerprint = format!("{:016x}", t.data_fingerprint);
+        if parts.meta.scene != t.scene || parts.meta.data_fingerprint != fingerprint {
+            return Err(e(format!(
+                "written for other training data (scene '{}', fingerprint {}; this run: \
+                 scene '{}', fingerprint {fingerprint})",
+                parts.meta.scene, parts.meta.data_fingerprint, t.scene
+            )));
+        }
         let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(parts.model))
             .map_err(|x| e(format!("model: {x}")))?;
         t.field = t
@@ -378,28 +429,34 @@ impl Trainer {
             .init()
             .from_bytes(Bytes::from_bytes_vec(parts.optimizer))
             .map_err(|x| e(format!("optimizer: {x}")))?;
-        if let (Some(grid), Some(thr)) = (t.occupancy.as_mut(), parts.meta.occupancy_threshold) {
-            if parts.occupancy.len() != grid.density.len() {
-                return Err(e(format!(
-                    "occupancy grid has {} cells, config expects {}",
-                    parts.occupancy.len(),
-                    grid.density.len()
-                )));
+        match (t.occupancy.as_mut(), parts.meta.occupancy_threshold_bits) {
+            (Some(grid), Some(bits)) => {
+                if parts.occupancy.len() != grid.density.len() {
+                    return Err(e(format!(
+                        "occupancy grid has {} cells, config expects {}",
+                        parts.occupancy.len(),
+                        grid.density.len()
+                    )));
+                }
+                grid.density = parts.occupancy;
+                grid.occupied = parts.occupied;
+                grid.density_threshold = f32::from_bits(bits);
             }
-            grid.density = parts.occupancy;
-            grid.density_threshold = thr;
-            let warm = parts.meta.step
-                >= t.config
-                    .sampler
-                    .occupancy
-                    .as_ref()
-                    .map_or(0, |o| o.warmup_steps);
-            for (o, d) in grid.occupied.iter_mut().zip(&grid.density) {
-                *o = !warm || *d > thr;
+            (None, None) => {}
+            (Some(_), None) => return Err(e("the checkpoint has no occupancy grid".into())),
+            (None, Some(_)) => {
+                return Err(e(
+                    "the checkpoint has an occupancy grid, the config none".into()
+                ))
             }
         }
         t.step = parts.meta.step;
-        t.rng = ChaCha8Rng::seed_from_u64(t.config.train.seed.wrapping_add(t.step as u64));
+        t.rng = parts.meta.rng.restore().ok_or_else(|| {
+            e(format!(
+                "rng: bad word position '{}'",
+                parts.meta.rng.word_pos
+            ))
+        })?;
         Ok(t)
     }
 
