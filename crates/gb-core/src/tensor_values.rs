@@ -17,8 +17,8 @@ pub struct TensorValuesError {
 
 /// The values of `data` as `f32`; `what` names them in the error.
 pub fn f32_values(data: TensorData, what: &'static str) -> Result<Vec<f32>, TensorValuesError> {
-    let found = format!("{:?}", data.dtype);
-    data.into_vec::<f32>().map_err(|_| TensorValuesError {
+    let found = format!("{:?}", data.dtype());
+    data.try_into_vec::<f32>().map_err(|_| TensorValuesError {
         what,
         expected: "f32",
         found,

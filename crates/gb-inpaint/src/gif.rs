@@ -259,7 +259,10 @@ pub fn write_orbit(
     let cameras: Vec<Camera> = scene.views.iter().map(|v| v.camera.clone()).collect();
     let downscale = trainer.config.train.image_downscale.max(1) * 2;
     let path = orbit_cameras(&cameras, frames, downscale);
-    let images: Vec<RgbImage> = path.iter().map(|c| trainer.render(c).rgb).collect();
+    let images = path
+        .iter()
+        .map(|c| trainer.render(c).map(|r| r.rgb))
+        .collect::<Result<Vec<RgbImage>, _>>()?;
     let Some(first) = images.first() else {
         return Ok(None);
     };

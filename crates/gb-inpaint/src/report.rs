@@ -385,7 +385,7 @@ pub fn render_masked_train_views(
     let mut views = Vec::new();
     for view in masked {
         let v = prepare_view(view, trainer.config.train.image_downscale);
-        let r = trainer.render(&v.camera);
+        let r = trainer.render(&v.camera).map_err(InpaintError::from)?;
         let stem = format!("train_{}", view.name);
         write_render_pngs(&renders, &stem, &r).map_err(InpaintError::from)?;
         views.push(TrainViewRender {

@@ -49,7 +49,7 @@ use gb_diffusion::distill::{
 use gb_nerf::scene::Scene;
 use gb_nerf::train::data::TrainData;
 use gb_nerf::train::losses::psnr_from_mse;
-use gb_nerf::train::{NerfConfig, Trainer};
+use gb_nerf::train::{NerfConfig, NerfError, Trainer};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -554,7 +554,7 @@ impl GuidedTrainer {
         let mode = self.method.prior_input;
         let vg = self.cached(view)?;
         let (image, rays) = render_rgb_input(&self.render_context(), vg, mode);
-        Ok((self.gate_observed(view, image), rays))
+        Ok((self.gate_observed(view, image)?, rays))
     }
 
     /// The normal-map prior input of training view `view` with its graph to the field, and
@@ -566,42 +566,48 @@ impl GuidedTrainer {
         let divisor = self.method.normal_render_divisor;
         let vg = self.cached(view)?;
         let (image, rays) = render_normal_input(&self.render_context(), vg, divisor);
-        Ok((self.gate_observed(view, image), rays))
+        Ok((self.gate_observed(view, image)?, rays))
     }
 
     /// The observed map of `view`, recomputed from the current field when it is missing or
     /// `visibility.refresh_every` steps old; `None` when visibility-aware guidance is off.
-    pub fn observed_map(&mut self, view: usize) -> Option<&ObservedMap> {
+    /// Errors when the rendered depth cannot be read back.
+    pub fn observed_map(&mut self, view: usize) -> Result<Option<&ObservedMap>, InpaintError> {
         let cfg = self.method.visibility.clone();
-        if !cfg.enabled() {
-            return None;
+        if !cfg.enabled() || self.guidance.is_none() {
+            return Ok(None);
         }
         let step = self.nerf.step;
-        let stale = self
-            .guidance
-            .as_ref()?
-            .visibility
-            .get(&view)
-            .is_none_or(|m| step >= m.step + cfg.refresh_every);
+        let stale = self.guidance.as_ref().is_some_and(|g| {
+            g.visibility
+                .get(&view)
+                .is_none_or(|m| step >= m.step + cfg.refresh_every)
+        });
         if stale {
             let margin = self.method.crop_margin;
-            let map = ObservedMap::compute(
+            let computed = ObservedMap::compute(
                 &self.render_context(),
                 &self.nerf.data.views,
                 view,
                 margin,
                 &cfg,
                 step,
-            )?;
+            )
+            .map_err(NerfError::from)?;
+            let Some(map) = computed else {
+                return Ok(None);
+            };
             tracing::debug!(
                 view,
                 step,
                 observed = map.observed_share(),
                 "visibility map recomputed"
             );
-            self.guidance.as_mut()?.visibility.insert(view, map);
+            if let Some(g) = self.guidance.as_mut() {
+                g.visibility.insert(view, map);
+            }
         }
-        self.guidance.as_ref()?.visibility.get(&view)
+        Ok(self.guidance.as_ref().and_then(|g| g.visibility.get(&view)))
     }
 
     /// The first step of the visibility maps (`visibility.start_step` scaled to the run).
@@ -613,42 +619,57 @@ impl GuidedTrainer {
     /// The per-pixel gradient weights `[1, 1, r, r]` of `view`'s prior input (`None` when
     /// visibility-aware guidance is off): `observed_weight` everywhere before
     /// [`Self::visibility_start`], then from the view's observed map.
-    fn observed_weights(&mut self, view: usize, r: usize) -> Option<Tensor<4>> {
+    fn observed_weights(
+        &mut self,
+        view: usize,
+        r: usize,
+    ) -> Result<Option<Tensor<4>>, InpaintError> {
         let weight = self.method.visibility.observed_weight;
         if !self.method.visibility.enabled() {
-            return None;
+            return Ok(None);
         }
         let device = self.nerf.field.device();
         if self.nerf.step < self.visibility_start() {
-            return Some(Tensor::<4>::full([1, 1, r, r], weight as f32, &device));
+            return Ok(Some(Tensor::<4>::full(
+                [1, 1, r, r],
+                weight as f32,
+                &device,
+            )));
         }
-        self.observed_map(view)
-            .map(|map| map.weights(r, weight, &device))
+        Ok(self
+            .observed_map(view)?
+            .map(|map| map.weights(r, weight, &device)))
     }
 
     /// The prior's inpainting mask `[1, 1, R, R]` of `view` under visibility-aware
     /// conditioning (`visibility.condition_on_observed`): the crop's mask less the pixels
     /// that other training views observe. `None` when that conditioning is off or before
     /// the maps start (the crop's own mask applies).
-    fn conditioning_mask(&mut self, view: usize) -> Option<Tensor<4>> {
+    fn conditioning_mask(&mut self, view: usize) -> Result<Option<Tensor<4>>, InpaintError> {
         let vis = &self.method.visibility;
         if !(vis.enabled() && vis.condition_on_observed) || self.nerf.step < self.visibility_start()
         {
-            return None;
+            return Ok(None);
         }
-        let mask = self.cached(view).ok()?.mask.clone();
+        let Ok(cached) = self.cached(view) else {
+            return Ok(None);
+        };
+        let mask = cached.mask.clone();
         let r = mask.dims()[2];
-        let unobserved = self.observed_map(view)?.weights(r, 0.0, &mask.device());
-        Some(mask * unobserved)
+        let device = mask.device();
+        Ok(self
+            .observed_map(view)?
+            .map(|map| map.weights(r, 0.0, &device))
+            .map(|unobserved| mask * unobserved))
     }
 
     /// `image` with the gradient on observed pixels scaled (identity when off).
-    fn gate_observed(&mut self, view: usize, image: Tensor<4>) -> Tensor<4> {
+    fn gate_observed(&mut self, view: usize, image: Tensor<4>) -> Result<Tensor<4>, InpaintError> {
         let r = image.dims()[2];
-        match self.observed_weights(view, r) {
+        Ok(match self.observed_weights(view, r)? {
             Some(w) => gate_gradient(image, w),
             None => image,
-        }
+        })
     }
 
     fn cached(&self, view: usize) -> Result<&ViewGuidance, InpaintError> {
@@ -674,7 +695,7 @@ impl GuidedTrainer {
         let seed = derive_seed(self.nerf.config.train.seed, step, modality.salt());
         let k = self.method.guide_every;
         let normal_start = self.normal_start();
-        let unobserved_mask = self.conditioning_mask(view);
+        let unobserved_mask = self.conditioning_mask(view)?;
         let (lambda, chain) = match modality {
             Modality::Rgb => (self.method.lambda_rgb, self.method.reference_chain_rule),
             Modality::Normal => (self.method.lambda_normal, self.method.reference_chain_rule),
@@ -823,7 +844,7 @@ impl GuidedTrainer {
             seconds: 0.0,
             guidance: records,
         };
-        if self.nerf.apply_loss(loss) {
+        if self.nerf.apply_loss(loss)? {
             self.nan_streak = 0;
         } else {
             self.nan_streak += 1;

@@ -128,7 +128,7 @@ fn without_guidance_the_guided_trainer_is_gb_nerfs_trainer() {
     let s = scene(dir.path());
     let mut reference = Trainer::new(&s, config(), KIND).unwrap();
     for _ in 0..3 {
-        reference.train_step();
+        reference.train_step().unwrap();
     }
     let mut ours = guided(&s, dir.path(), "none", |_| {});
     for _ in 0..3 {

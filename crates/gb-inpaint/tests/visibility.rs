@@ -70,7 +70,7 @@ fn trainer(scene: &Scene, dir: &Path, steps: usize, observed_weight: f64) -> Gui
     let mut t = GuidedTrainer::new(scene, c, m, Some((prior, prompts)), KIND).unwrap();
     for _ in 0..steps {
         // reconstruction only: the map is tested, not the guidance
-        gb_nerf::train::Trainer::train_step(&mut t);
+        gb_nerf::train::Trainer::train_step(&mut t).unwrap();
     }
     t
 }
@@ -186,7 +186,11 @@ fn observed_maps_agree_with_ground_truth_visibility() {
     let free = object_free_depths(&t.data.views);
     let (mut agree, mut total, mut obs_ours, mut obs_gt) = (0usize, 0usize, 0usize, 0usize);
     for &v in &views {
-        let map = t.observed_map(v).expect("visibility is on").clone();
+        let map = t
+            .observed_map(v)
+            .unwrap()
+            .expect("visibility is on")
+            .clone();
         let gt = ground_truth_map(&t.data.views, &free, v, 32, 0.05);
         let g = CropGeometry::new(&t.data.views[v], 0.25, 32).unwrap();
         for &i in &g.masked {
@@ -220,7 +224,7 @@ fn nothing_is_observed_when_every_other_view_masks_everything() {
             });
         }
     }
-    let map = t.observed_map(v).unwrap();
+    let map = t.observed_map(v).unwrap().unwrap();
     assert!(map.masked > 0);
     assert_eq!(map.observed_share(), 0.0);
 }
@@ -233,7 +237,7 @@ fn conditioning_on_observed_pixels_leaves_only_unobserved_ones_to_the_prior() {
     let view = views
         .into_iter()
         .find(|&v| {
-            let share = t.observed_map(v).unwrap().observed_share();
+            let share = t.observed_map(v).unwrap().unwrap().observed_share();
             share > 0.1 && share < 0.9
         })
         .expect("a view with a partly observed hole");
@@ -262,7 +266,11 @@ fn conditioning_on_observed_pixels_leaves_only_unobserved_ones_to_the_prior() {
     let crop_mask = CropGeometry::new(&t.data.views[view], 0.25, r)
         .unwrap()
         .mask_tensor(&device);
-    let unobserved = t.observed_map(view).unwrap().weights(r, 0.0, &device);
+    let unobserved = t
+        .observed_map(view)
+        .unwrap()
+        .unwrap()
+        .weights(r, 0.0, &device);
     let flags = |m: Tensor<4>| -> Vec<bool> {
         let v = latent_mask(m, 4).into_data().try_to_vec::<f32>().unwrap();
         v.iter().map(|x| *x > 0.5).collect()

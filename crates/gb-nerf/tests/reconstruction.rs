@@ -69,9 +69,12 @@ fn training_fits_the_plane_depth_and_normals() {
     let scene = common::plane_scene(6, 24, 18);
     let mut trainer = Trainer::new(&scene, config(200, true), BackendKind::Flex).unwrap();
     let test = scene.split(Split::Test).next().unwrap();
-    let before = psnr(&trainer.render(&test.camera).rgb.data, &test.image.data);
+    let before = psnr(
+        &trainer.render(&test.camera).unwrap().rgb.data,
+        &test.image.data,
+    );
     let summary = trainer.fit(None, false).unwrap();
-    let render = trainer.render(&test.camera);
+    let render = trainer.render(&test.camera).unwrap();
     let grid = trainer.occupancy.as_ref().unwrap();
     eprintln!(
         "occupied {:.3}, threshold {:.3}, max density {:.3}",
@@ -120,7 +123,10 @@ fn checkpoint_resume_restores_the_state() {
     assert_eq!(b.step, 12);
     assert_eq!(b.occupancy, a.occupancy);
     let cam = &scene.views[0].camera;
-    assert_eq!(a.render(cam).rgb.data, b.render(cam).rgb.data);
+    assert_eq!(
+        a.render(cam).unwrap().rgb.data,
+        b.render(cam).unwrap().rgb.data
+    );
     // resume continues to a longer schedule
     let mut cfg = b.config.clone();
     cfg.train.steps = 15;

@@ -83,7 +83,7 @@ fn train_with_curve(
     let mut seconds = 0.0;
     while t.step < steps {
         let t0 = std::time::Instant::now();
-        let stats = t.train_step();
+        let stats = t.train_step()?;
         seconds += t0.elapsed().as_secs_f64();
         bar.set_position(t.step as u64);
         bar.set_message(format!("psnr {:.2}", stats.psnr));
@@ -129,7 +129,7 @@ fn test_psnr(t: &Trainer, scene: &Scene) -> anyhow::Result<f64> {
     let mut vals = Vec::new();
     for view in scene.split(Split::Test) {
         let v = prepare_view(view, t.config.train.image_downscale);
-        let r = t.render(&v.camera);
+        let r = t.render(&v.camera)?;
         let region = match &v.mask {
             Some(m) => Region::Mask(m.data.iter().map(|b| !b).collect()),
             None => Region::Full,
@@ -211,12 +211,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for &device in &devices {
             let mut t = Trainer::new(&scene, cfg.clone(), device)?;
             for _ in 0..2 {
-                t.train_step();
+                t.train_step()?;
             }
             let start = Instant::now();
             let mut evals = 0.0;
             for _ in 0..args.steps {
-                evals += t.train_step().evaluations_per_ray;
+                evals += t.train_step()?.evaluations_per_ray;
             }
             let secs = start.elapsed().as_secs_f64();
             let sps = args.steps as f64 / secs;

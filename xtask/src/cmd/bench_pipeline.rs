@@ -179,7 +179,7 @@ fn profiled_step(t: &mut GuidedTrainer, view: usize) -> anyhow::Result<[f64; 6]>
     sync(normal_term.loss.clone());
     let normal_guidance_s = lap(&mut clock);
     let loss = recon.loss + rgb_term.loss + normal_term.loss;
-    t.nerf.apply_loss(loss);
+    t.nerf.apply_loss(loss)?;
     sync(t.nerf.field.density(&[[0.5, 0.5, 0.5]]));
     let backward_s = lap(&mut clock);
     Ok([

@@ -382,7 +382,7 @@ pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
     let mut pairs = Vec::new();
     for view in scene.split(Split::Test) {
         let v = prepare_view(view, trainer.config.train.image_downscale);
-        let r = trainer.render(&v.camera);
+        let r = trainer.render(&v.camera)?;
         write_render_pngs(&renders, &view.name, &r)?;
         pairs.push(ViewPair {
             name: view.name.clone(),

@@ -32,6 +32,9 @@ pub enum NerfError {
         /// What is wrong.
         reason: String,
     },
+    /// A tensor read back to the host did not hold the expected values.
+    #[error(transparent)]
+    Values(#[from] gb_core::TensorValuesError),
     /// A file could not be written.
     #[error("{path}: {source}")]
     Io {

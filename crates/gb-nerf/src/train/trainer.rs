@@ -228,43 +228,44 @@ impl Trainer {
     /// Completes a step with `loss` (the reconstruction loss plus any extra terms): one
     /// backward pass, Adam at this step's learning rate, then the occupancy-grid update. The
     /// step counter advances either way; a non-finite `loss` skips the update and returns
-    /// `false`.
-    pub fn apply_loss(&mut self, loss: Tensor<1>) -> bool {
+    /// `false`. Errors when the occupancy grid cannot read the field's densities.
+    pub fn apply_loss(&mut self, loss: Tensor<1>) -> Result<bool, NerfError> {
         let value: f32 = loss.clone().detach().into_scalar();
         let lr = self.config.lr_at(self.step);
         self.step += 1;
         if !value.is_finite() {
-            return false;
+            return Ok(false);
         }
         let grads = GradientsParams::from_grads(loss.backward(), &self.field);
         self.field = self.optimizer.step(lr, self.field.clone(), grads);
-        self.maybe_update_occupancy();
-        true
+        self.maybe_update_occupancy()?;
+        Ok(true)
     }
 
     /// One optimisation step ([`Self::reconstruction_loss`] then [`Self::apply_loss`]).
-    pub fn train_step(&mut self) -> StepStats {
+    pub fn train_step(&mut self) -> Result<StepStats, NerfError> {
         let r = self.reconstruction_loss();
         let loss_value: f32 = r.loss.clone().detach().into_scalar();
-        self.apply_loss(r.loss);
-        StepStats {
+        self.apply_loss(r.loss)?;
+        Ok(StepStats {
             loss: loss_value as f64,
             psnr: psnr_from_mse(r.rgb_mse as f64),
             evaluations_per_ray: r.evaluations_per_ray,
-        }
+        })
     }
 
-    fn maybe_update_occupancy(&mut self) {
+    fn maybe_update_occupancy(&mut self) -> Result<(), NerfError> {
         let Some(cfg) = self.config.sampler.occupancy.clone() else {
-            return;
+            return Ok(());
         };
         let Some(grid) = self.occupancy.as_mut() else {
-            return;
+            return Ok(());
         };
         if self.step >= cfg.warmup_steps && self.step.is_multiple_of(cfg.update_every) {
             let valid = self.field.valid();
-            grid.update(&valid, cfg.cells_per_update, cfg.decay, &mut self.rng);
+            grid.update(&valid, cfg.cells_per_update, cfg.decay, &mut self.rng)?;
         }
+        Ok(())
     }
 
     /// Trains until `config.train.steps`, with a progress bar (when `progress`) and a
@@ -292,7 +293,7 @@ impl Trainer {
         let mut last = None;
         let mut evals = 0.0f64;
         while self.step < total {
-            let s = self.train_step();
+            let s = self.train_step()?;
             evals += s.evaluations_per_ray as f64;
             let done = (self.step - first) as f64;
             bar.set_position(self.step as u64);
@@ -460,9 +461,10 @@ impl Trainer {
         Ok(t)
     }
 
-    /// Renders a whole image (no autodiff) with the configured normals.
-    pub fn render(&self, camera: &Camera) -> ImageRender {
-        render_image(
+    /// Renders a whole image (no autodiff) with the configured normals; errors when a
+    /// rendered tensor does not hold `f32` values.
+    pub fn render(&self, camera: &Camera) -> Result<ImageRender, NerfError> {
+        Ok(render_image(
             &self.field,
             camera,
             &ImageSettings {
@@ -475,6 +477,6 @@ impl Trainer {
                 normals: self.config.render.normals,
                 chunk: self.config.render.chunk,
             },
-        )
+        )?)
     }
 }
