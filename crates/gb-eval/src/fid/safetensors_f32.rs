@@ -26,10 +26,11 @@ impl F32Tensors {
     /// Indexes safetensors bytes (parsed by the `safetensors` crate, which checks the
     /// header, the offsets and the dtype sizes); `path` only names the file in errors.
     pub fn parse(bytes: &[u8], path: &Path) -> Result<Self, FidError> {
-        let parsed = safetensors::SafeTensors::deserialize(bytes).map_err(|e| FidError::Format {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let parsed =
+            safetensors::SafeTensors::deserialize(bytes).map_err(|e| FidError::Format {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?;
         let tensors = parsed
             .tensors()
             .into_iter()
