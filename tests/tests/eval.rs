@@ -53,6 +53,10 @@ fn arg(p: &Path) -> &str {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): weights/ (ST-LPIPS, FID, BRISQUE)"
+)]
 fn eval_writes_the_paper_metrics_as_json_and_markdown() {
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path();

@@ -371,6 +371,10 @@ fn without_method_and_prior_the_default_runs() {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): data/statue and weights/brisque_*_live.yml"
+)]
 fn a_real_scene_without_test_views_is_scored_without_a_reference() {
     let dir = tempfile::tempdir().unwrap();
     let preset = small_preset(dir.path(), None);

@@ -20,7 +20,14 @@ fn info_json(dir: &Path, extra: &[&str]) -> serde_json::Value {
     serde_json::from_str(&stdout(&out)).unwrap()
 }
 
+// fails when the shared data appeared after this crate was built without it
+gb_core::shared_data_guard!();
+
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): data/ (statue, fern, lego_small)"
+)]
 fn scene_info_reads_the_real_scenes() {
     let data = gb_core::test_data_dir().join("data");
     let statue = info_json(&data.join("statue"), &[]);

@@ -22,7 +22,14 @@ fn load_opencv_model() -> Brisque {
         .expect("BRISQUE model in shared/weights")
 }
 
+// fails when the shared data appeared after this crate was built without it
+gb_core::shared_data_guard!();
+
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): weights/brisque_*_live.yml"
+)]
 fn features_and_scores_match_opencv_within_1e_3() {
     let model = load_opencv_model();
     let exp = expected();
@@ -75,6 +82,10 @@ fn features_and_scores_match_opencv_within_1e_3() {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): weights/brisque_*_live.yml"
+)]
 fn opencv_model_file_is_read_completely() {
     let model = load_opencv_model();
     assert_eq!(model.svr.dim, 36);
@@ -117,6 +128,10 @@ fn libsvm_text_model_predicts_like_the_libsvm_formula() {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): weights/brisque_*_live.yml"
+)]
 fn libsvm_model_with_svm_scale_range_scores_an_image() {
     // The OpenCV model converted to libsvm text and an svm-scale range file must give the
     // same score as the YAML pair (up to the f32 kernel arithmetic OpenCV uses).
@@ -162,6 +177,10 @@ fn libsvm_model_with_svm_scale_range_scores_an_image() {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): weights/brisque_*_live.yml"
+)]
 fn bad_files_and_images_are_clear_errors() {
     let missing = Path::new("/nonexistent/brisque_model_live.yml");
     let err = RbfSvr::load_opencv_yaml(missing).unwrap_err();

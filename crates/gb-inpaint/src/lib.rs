@@ -22,13 +22,15 @@
 //!   our own rather than a plotting crate, see [`svg`]) and the orbit animation;
 //! - [`visibility`]: visibility-aware guidance (the prior acts only where no training view
 //!   sees the surface);
-//! - [`ablate`]: the tables of `cargo xtask ablate` (baselines, ablation, w3 sweep).
+//! - [`ablate`]: the tables of `cargo xtask ablate` (baselines, ablation, w3 sweep);
+//! - [`export`]: the run's inpainted scene as a nerfstudio dataset (`OUT/export/`).
 //!
 //! The command line is `cargo xtask inpaint` (xtask/src/cmd/inpaint.rs).
 
 pub mod ablate;
 pub mod crop;
 pub mod error;
+pub mod export;
 pub mod gif;
 pub mod guidance;
 pub mod method;

@@ -452,6 +452,9 @@ mod tests {
         im
     }
 
+    // fails when the shared data appeared after this crate was built without it
+    gb_core::shared_data_guard!();
+
     #[test]
     fn psnr_ssim_regions_and_unavailable_reasons() {
         let (w, h) = (32, 24);
@@ -530,6 +533,10 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(
+        gb_no_shared_data,
+        ignore = "needs the shared test data (../shared or GB_TEST_DATA): weights/ and data/rgb_normal_sample"
+    )]
     fn renders_without_reference_get_brisque_whole_and_in_the_mask_box() {
         let data = gb_core::test_data_dir();
         let weights = data.join("weights");

@@ -53,7 +53,14 @@ fn check_llff_cameras(scene: &gb_nerf::scene::Scene, raw: &[f64], factor: f64) {
     assert_close(scene.far, max_far, 1e-3, "far");
 }
 
+// fails when the shared data appeared after this crate was built without it
+gb_core::shared_data_guard!();
+
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): data/statue"
+)]
 fn statue_has_29_masked_training_views_at_504x378() {
     let dir = data("statue");
     let (format, scene) = load(&dir, &LoadOptions::default()).unwrap();
@@ -88,6 +95,10 @@ fn statue_has_29_masked_training_views_at_504x378() {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): data/fern"
+)]
 fn fern_has_20_views_and_every_8th_held_out() {
     let dir = data("fern");
     let scene = llff::load(&dir, &LlffOptions::default()).unwrap();
@@ -120,6 +131,10 @@ fn fern_has_20_views_and_every_8th_held_out() {
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): data/fern"
+)]
 fn fern_normalisation_makes_the_average_pose_identity_and_min_near_four_thirds() {
     let dir = data("fern");
     let scene = llff::load(
@@ -162,6 +177,10 @@ fn fern_normalisation_makes_the_average_pose_identity_and_min_near_four_thirds()
 }
 
 #[test]
+#[cfg_attr(
+    gb_no_shared_data,
+    ignore = "needs the shared test data (../shared or GB_TEST_DATA): data/lego_small"
+)]
 fn lego_small_has_100_train_and_25_test_views_with_camera_angle_focal() {
     let dir = data("lego_small");
     let bg = [0.0, 1.0, 0.0];

@@ -43,6 +43,8 @@
 //!   `eval` every gb-eval metric that applies (`gb_inpaint::metrics`: PSNR / SSIM full, bbox
 //!   and mask, ST-LPIPS with the weights of `--weights` or `$GB_TEST_DATA/weights`, D-PSNR,
 //!   FID / D-FID from 8 test views, BRISQUE, NIMA), with the reason of each unavailable one;
+//! - `export/`: the inpainted training views (RGB, 16-bit depth), `transforms.json` and the
+//!   orbit's `camera_path.json` for nerfstudio (`gb_inpaint::export`);
 //! - `orbit.gif`: the trained field along a closed path through the input cameras, at half
 //!   the training resolution (`--orbit-frames`, default 24; 0 for none; `gb_inpaint::gif`);
 //! - `report.html` (+ `report/`): ground truth, our render, the baseline (`--baseline DIR`,
@@ -461,6 +463,12 @@ pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
     };
     let eval_seconds = eval_start.elapsed().as_secs_f64();
     let orbit = gb_inpaint::gif::write_orbit(&args.out, &scene, &trainer, args.orbit_frames)?;
+    let export = gb_inpaint::export::write_export(
+        &args.out.join("export"),
+        &scene,
+        &trainer,
+        args.orbit_frames,
+    )?;
     let mean = |i: usize| (counts[i] > 0).then(|| sums[i] / counts[i] as f64);
     let per_step = |secs: f64, n: usize| (n > 0).then(|| secs / n as f64);
     let metrics = json!({
@@ -474,6 +482,7 @@ pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
         "train_seconds_this_run": summary.seconds,
         "render_seconds": render_seconds,
         "eval_seconds": eval_seconds,
+        "export": export,
         "orbit": orbit.as_ref().map(|o| json!({"file": "orbit.gif", "frames": o.frames, "width": o.width, "height": o.height, "seconds": o.seconds})),
         "samples_per_ray": trainer.config.sampler.samples_per_ray,
         "mean_train_evaluations_per_ray": summary.mean_evaluations_per_ray,
