@@ -40,6 +40,8 @@ enum Command {
     Parity(cmd::parity::Args),
     /// Benchmarks writing bench/results/*.json (`bench eval`, ...).
     Bench(cmd::bench::Args),
+    /// Property tests of every file reader (10 000 cases each), report in bench/results.
+    Fuzz(cmd::fuzz::Args),
     /// Generate a procedural object-removal scene (stairs, fence) in the SPIn-NeRF layout.
     Scene(cmd::scene::Args),
     /// Summarise a scene folder: views per split, resolution, masks, near/far, warnings.
@@ -105,6 +107,7 @@ fn main() {
         Command::DistillImage(a) => cmd::distill_image::run(a),
         Command::Parity(a) => cmd::parity::run(a),
         Command::Bench(a) => cmd::bench::run(a),
+        Command::Fuzz(a) => cmd::fuzz::run(a),
         Command::Scene(a) => cmd::scene::run(a),
         Command::SceneInfo(a) => cmd::scene_info::run(a),
     };

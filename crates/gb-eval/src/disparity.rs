@@ -92,6 +92,7 @@ pub fn read_disparity(path: &Path, kind: DepthKind) -> Result<ScalarMap, Dispari
 }
 
 fn read_npy(bytes: &[u8]) -> Result<ScalarMap, String> {
+    gb_core::check_npy_header(bytes)?;
     let npy = npyz::NpyFile::new(bytes).map_err(|e| e.to_string())?;
     let shape: Vec<usize> = npy.shape().iter().map(|&s| s as usize).collect();
     let fortran = matches!(npy.order(), npyz::Order::Fortran);

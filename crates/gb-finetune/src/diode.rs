@@ -457,6 +457,7 @@ pub fn read_npy_f32(path: &Path) -> Result<(Vec<u64>, Vec<f32>), FinetuneError> 
         path: path.to_path_buf(),
         message,
     };
+    gb_core::check_npy_header(&bytes).map_err(|e| bad(format!("bad .npy header: {e}")))?;
     let file = npyz::NpyFile::new(&bytes[..]).map_err(|e| bad(format!("not a .npy file: {e}")))?;
     let shape = file.shape().to_vec();
     let order = file.order();

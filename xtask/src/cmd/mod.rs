@@ -12,6 +12,7 @@ pub mod distill_bench;
 pub mod distill_image;
 pub mod eval;
 pub mod finetune;
+pub mod fuzz;
 pub mod inpaint;
 pub mod inpaint_image;
 pub mod parity;

@@ -18,6 +18,10 @@ pub enum YamlValue {
     Map(Vec<(String, YamlValue)>),
 }
 
+/// The deepest nesting of blocks or flow collections accepted (OpenCV's BRISQUE files nest
+/// 4 levels); deeper documents are an error instead of a stack overflow.
+pub const MAX_DEPTH: usize = 64;
+
 /// One logical line: flow collections that span lines are joined into one.
 struct Line {
     number: usize,
@@ -34,6 +38,7 @@ pub fn parse_opencv_yaml(text: &str, path: &Path) -> Result<YamlValue, BrisqueEr
     let mut parser = BlockParser {
         lines,
         pos: 0,
+        depth: 0,
         path,
     };
     let indent = parser.lines[0].indent;
@@ -104,6 +109,8 @@ fn logical_lines(text: &str, path: &Path) -> Result<Vec<Line>, BrisqueError> {
 struct BlockParser<'a> {
     lines: Vec<Line>,
     pos: usize,
+    /// Blocks open around the current line.
+    depth: usize,
     path: &'a Path,
 }
 
@@ -117,7 +124,26 @@ impl BlockParser<'_> {
         }
     }
 
+    /// Runs `f` one nesting level deeper, or fails past [`MAX_DEPTH`].
+    fn nested(
+        &mut self,
+        f: impl FnOnce(&mut Self) -> Result<YamlValue, BrisqueError>,
+    ) -> Result<YamlValue, BrisqueError> {
+        if self.depth >= MAX_DEPTH {
+            let line = self.lines.get(self.pos).map_or(0, |l| l.number);
+            return Err(too_deep(self.path, line));
+        }
+        self.depth += 1;
+        let value = f(self);
+        self.depth -= 1;
+        value
+    }
+
     fn sequence(&mut self, indent: usize) -> Result<YamlValue, BrisqueError> {
+        self.nested(|p| p.sequence_items(indent))
+    }
+
+    fn sequence_items(&mut self, indent: usize) -> Result<YamlValue, BrisqueError> {
         let mut items = Vec::new();
         while let Some(line) = self.lines.get(self.pos) {
             if line.indent != indent || !(line.text == "-" || line.text.starts_with("- ")) {
@@ -139,13 +165,17 @@ impl BlockParser<'_> {
                 items.push(self.map(col)?);
             } else {
                 self.pos += 1;
-                items.push(parse_flow(&rest, self.path, number)?);
+                items.push(parse_flow(&rest, self.path, number, self.depth)?);
             }
         }
         Ok(YamlValue::Seq(items))
     }
 
     fn map(&mut self, indent: usize) -> Result<YamlValue, BrisqueError> {
+        self.nested(|p| p.map_entries(indent))
+    }
+
+    fn map_entries(&mut self, indent: usize) -> Result<YamlValue, BrisqueError> {
         let mut entries = Vec::new();
         while let Some(line) = self.lines.get(self.pos) {
             if line.indent != indent {
@@ -167,7 +197,7 @@ impl BlockParser<'_> {
             let parsed = if value.is_empty() {
                 self.child(indent)?
             } else {
-                parse_flow(value, self.path, number)?
+                parse_flow(value, self.path, number, self.depth)?
             };
             entries.push((key, parsed));
         }
@@ -191,6 +221,10 @@ impl BlockParser<'_> {
             _ => Ok(YamlValue::Scalar(String::new())),
         }
     }
+}
+
+fn too_deep(path: &Path, line: usize) -> BrisqueError {
+    parse_err(path, line, format!("nested more than {MAX_DEPTH} levels deep"))
 }
 
 /// Drops a leading tag such as `!!opencv-matrix` or `!<tag:...>`.
@@ -228,11 +262,17 @@ fn split_entry(text: &str) -> Option<(String, &str)> {
     None
 }
 
-/// Parses a flow value: `[a, b]`, `{ k: v }` (OpenCV also writes `{ k:v }`), or a scalar.
-fn parse_flow(text: &str, path: &Path, line: usize) -> Result<YamlValue, BrisqueError> {
+/// Parses a flow value: `[a, b]`, `{ k: v }` (OpenCV also writes `{ k:v }`), or a scalar;
+/// `depth` is the nesting of the blocks around it.
+fn parse_flow(
+    text: &str,
+    path: &Path,
+    line: usize,
+    depth: usize,
+) -> Result<YamlValue, BrisqueError> {
     let chars: Vec<char> = text.chars().collect();
     let mut pos = 0;
-    let value = flow_value(&chars, &mut pos, path, line)?;
+    let value = flow_value(&chars, &mut pos, path, line, depth)?;
     skip_ws(&chars, &mut pos);
     if pos != chars.len() {
         return Err(parse_err(
@@ -255,8 +295,19 @@ fn flow_value(
     pos: &mut usize,
     path: &Path,
     line: usize,
+    depth: usize,
 ) -> Result<YamlValue, BrisqueError> {
     skip_ws(chars, pos);
+    // Tags (`!!opencv-matrix`, `!<...>`) are dropped.
+    while chars.get(*pos) == Some(&'!') {
+        while *pos < chars.len() && !chars[*pos].is_whitespace() {
+            *pos += 1;
+        }
+        skip_ws(chars, pos);
+    }
+    if depth >= MAX_DEPTH && matches!(chars.get(*pos), Some('[' | '{')) {
+        return Err(too_deep(path, line));
+    }
     match chars.get(*pos) {
         Some('[') => {
             *pos += 1;
@@ -269,7 +320,7 @@ fn flow_value(
                         return Ok(YamlValue::Seq(items));
                     }
                     Some(',') => *pos += 1,
-                    Some(_) => items.push(flow_value(chars, pos, path, line)?),
+                    Some(_) => items.push(flow_value(chars, pos, path, line, depth + 1)?),
                     None => return Err(parse_err(path, line, "unclosed '['")),
                 }
             }
@@ -295,18 +346,12 @@ fn flow_value(
                             ));
                         }
                         *pos += 1;
-                        let value = flow_value(chars, pos, path, line)?;
+                        let value = flow_value(chars, pos, path, line, depth + 1)?;
                         entries.push((key, value));
                     }
                     None => return Err(parse_err(path, line, "unclosed '{'")),
                 }
             }
-        }
-        Some('!') => {
-            while *pos < chars.len() && !chars[*pos].is_whitespace() {
-                *pos += 1;
-            }
-            flow_value(chars, pos, path, line)
         }
         Some(_) => Ok(YamlValue::Scalar(scalar_token(
             chars,
@@ -389,7 +434,7 @@ impl YamlValue {
         let rows = self.get("rows")?.as_f64()? as usize;
         let cols = self.get("cols")?.as_f64()? as usize;
         let data = self.get("data")?.as_f64_vec()?;
-        if data.len() != rows * cols {
+        if Some(data.len()) != rows.checked_mul(cols) {
             return None;
         }
         Some((rows, cols, data))

@@ -105,7 +105,8 @@ impl RbfSvr {
         else {
             return Err(field_err("opencv_ml_svm.support_vectors", "not a sequence"));
         };
-        let mut support_vectors = Vec::with_capacity(rows.len() * dim);
+        // No capacity from `var_count`: it is the file's word, the rows are what it holds.
+        let mut support_vectors = Vec::new();
         for (i, row) in rows.iter().enumerate() {
             let values = row.as_f64_vec().ok_or_else(|| {
                 field_err(
@@ -152,7 +153,9 @@ impl RbfSvr {
             Some(idx) => idx.iter().map(|v| *v as usize).collect(),
             None => (0..alpha.len()).collect(),
         };
-        if index.len() != alpha.len() || index.iter().any(|i| *i >= n_sv) {
+        // More alphas than support vectors would copy vectors (`alpha.len() * dim` values
+        // from a small file); OpenCV writes at most one alpha per support vector.
+        if index.len() != alpha.len() || alpha.len() > n_sv || index.iter().any(|i| *i >= n_sv) {
             return Err(field_err(
                 "opencv_ml_svm.decision_functions[0].index",
                 &format!(

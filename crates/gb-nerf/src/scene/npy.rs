@@ -23,6 +23,7 @@ pub fn read_float_array(path: &Path) -> Result<NpyArray, SceneError> {
         path: path.to_path_buf(),
         reason,
     };
+    gb_core::check_npy_header(&bytes).map_err(npy_err)?;
     let file = npyz::NpyFile::new(&bytes[..]).map_err(|e| npy_err(e.to_string()))?;
     let shape = file.shape().to_vec();
     let order = file.order();
