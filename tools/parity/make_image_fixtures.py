@@ -166,7 +166,7 @@ def vae_fixture(seed):
 
 
 def scheduler_fixture():
-    # SD-1.5's scheduler config (runwayml/stable-diffusion-inpainting, scheduler_config.json).
+    # SD-1.5's scheduler config (stable-diffusion-v1-5/stable-diffusion-inpainting, scheduler_config.json).
     cfg = dict(num_train_timesteps=1000, beta_start=0.00085, beta_end=0.012, beta_schedule="scaled_linear",
                clip_sample=False, set_alpha_to_one=False, steps_offset=1, prediction_type="epsilon")
     out = {}

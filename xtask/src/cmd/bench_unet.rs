@@ -6,7 +6,7 @@
 //! Peak memory is the process's peak resident set (`VmHWM`), weights included; on wgpu it
 //! does not see GPU memory.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
@@ -36,8 +36,8 @@ pub struct Args {
     /// Backend: ndarray, flex (default) or wgpu.
     #[arg(long, value_parser = super::parse::device())]
     device: Option<BackendKind>,
-    /// Python with torch and diffusers (default: $GB_PYREF_PYTHON, else /work/pyref/bin/python);
-    /// `none` skips the reference.
+    /// Python with torch and diffusers (default: $GB_PYTHON, else python3 on PATH;
+    /// `bash tools/bench/make_venv.sh` makes the pinned one); `none` skips the reference.
     #[arg(long)]
     python: Option<PathBuf>,
     /// Threads for torch (default: all logical cores).
@@ -51,7 +51,7 @@ pub struct Args {
     out: PathBuf,
 }
 
-/// SD-1.5-inpainting's `unet/config.json` (runwayml/stable-diffusion-inpainting).
+/// SD-1.5-inpainting's `unet/config.json` (stable-diffusion-v1-5/stable-diffusion-inpainting).
 pub fn sd15_inpainting_unet() -> anyhow::Result<UNet2DConditionConfig> {
     serde_json::from_value(json!({
         "in_channels": 9, "out_channels": 4, "sample_size": 64, "layers_per_block": 2,
@@ -93,6 +93,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.vae_sizes.iter().any(|&s| s == 0 || s % 8 != 0) {
         bail!("--vae-sizes must be positive multiples of 8");
     }
+    // The diffusers reference runs after the Rust timing: check its packages first.
+    let reference = match args.python.as_deref() {
+        Some(p) if p.as_os_str() == "none" => None,
+        explicit => Some(super::bench_python::reference_python(
+            explicit,
+            &["torch", "diffusers"],
+        )?),
+    };
     let kind = args.device.unwrap_or_default();
     let device = kind.device();
     let cfg = sd15_inpainting_unet()?;
@@ -140,7 +148,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "vae_encoder_fwd_bwd_s": vae_times,
         "peak_rss_mb": super::bench::peak_rss_mb(),
     });
-    let python = run_python(&args);
+    let python = run_python(&args, reference.as_deref());
     let ratio = |k: &str| -> Value {
         match (rust[k].as_f64(), python.get(k).and_then(Value::as_f64)) {
             (Some(r), Some(p)) if p > 0.0 => json!(r / p),
@@ -176,21 +184,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// Runs tools/bench/unet_bench.py; on failure the JSON records why.
-fn run_python(args: &Args) -> Value {
-    let python = args
-        .python
-        .clone()
-        .or_else(|| std::env::var_os("GB_PYREF_PYTHON").map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from("/work/pyref/bin/python"));
-    if python.as_os_str() == "none" {
+fn run_python(args: &Args, python: Option<&Path>) -> Value {
+    let Some(python) = python else {
         return json!({ "skipped": "--python none" });
-    }
+    };
     let threads = args.threads.unwrap_or_else(|| {
         std::thread::available_parallelism()
             .map(|n| n.get())
             .unwrap_or(1)
     });
-    let mut cmd = Command::new(&python);
+    let mut cmd = Command::new(python);
     cmd.arg("tools/bench/unet_bench.py")
         .args([
             "--latent",

@@ -150,7 +150,8 @@ fn locate_prior(spec: &str) -> anyhow::Result<PathBuf> {
         return Ok(path.to_path_buf());
     }
     if hub::is_hub_id(spec) {
-        return hub::resolve(spec, None, None).with_context(|| format!("prior `{spec}`"));
+        return hub::resolve(spec, &hub::HubSettings::from_env())
+            .with_context(|| format!("prior `{spec}`"));
     }
     bail!("prior `{spec}`: no such folder, and not a hub id (owner/name)")
 }

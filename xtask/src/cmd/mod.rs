@@ -5,6 +5,7 @@ pub mod bench;
 pub mod bench_eval;
 pub mod bench_nerf;
 pub mod bench_pipeline;
+pub mod bench_python;
 pub mod bench_quality;
 pub mod bench_unet;
 pub mod devices;

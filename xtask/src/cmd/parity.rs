@@ -60,13 +60,12 @@ pub struct Args {
     /// Which component to run.
     #[arg(long, value_enum)]
     pub component: Component,
-    /// A diffusers-layout folder, or a hub id (`owner/name[@rev]`): taken from the hf-hub
-    /// cache (`$HF_HOME/hub`), else downloaded into it from `--hub-endpoint`.
+    /// A diffusers-layout folder, or a hub id (`owner/name[@rev]`): taken from the hub
+    /// cache (`$HF_HUB_CACHE`, else `$HF_HOME/hub`), else downloaded into it.
     #[arg(long)]
     pub model: String,
     /// Hub to download a hub id from when it is not cached (default: `$HF_ENDPOINT`, else
-    /// https://huggingface.co). The built-in downloader speaks `http://` only (a mirror);
-    /// fetch from huggingface.co itself with `huggingface-cli download ID`.
+    /// https://huggingface.co).
     #[arg(long)]
     pub hub_endpoint: Option<String>,
     /// Inputs: a JSON list of strings for `tokenizer`, a safetensors file otherwise.
@@ -134,7 +133,12 @@ fn resolve_model(spec: &str, endpoint: Option<&str>) -> anyhow::Result<PathBuf> 
         return Ok(path.to_path_buf());
     }
     if is_hub_id(spec) {
-        return Ok(hub::resolve(spec, endpoint, None)?);
+        let settings = hub::HubSettings::from_env();
+        let settings = match endpoint {
+            Some(e) => settings.with_endpoint(e),
+            None => settings,
+        };
+        return Ok(hub::resolve(spec, &settings)?);
     }
     bail!("--model {spec}: neither a folder nor a hub id (owner/name)")
 }

@@ -7,8 +7,8 @@
 //! - [`folder`]: the diffusers folder (`model_index.json`, sub-folders, `.fp16` variants).
 //! - [`save`]: [`save_module`], the inverse: a module to a diffusers-named safetensors file.
 //! - [`header`]: a safetensors file's layout checked from its header (truncated files).
-//! - [`hub`]: resolving a hub id to a local folder through the `hf-hub` cache, and
-//!   downloading a pipeline snapshot into that cache from an `http://` endpoint.
+//! - [`hub`]: resolving a hub id to a local folder through the hub cache, offline first,
+//!   and downloading a pipeline snapshot into that cache with `hf-hub`.
 
 pub mod error;
 pub mod folder;
