@@ -17,7 +17,7 @@ pub mod testdata;
 pub use assets::{assets_dir, tiny_prior_dir};
 pub use atomic::write_atomic;
 pub use backend::{heavy_test_backends, test_backends, BackendKind};
-pub use npy_guard::check_npy_header;
 pub use image_io::{read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage};
+pub use npy_guard::check_npy_header;
 pub use tensor_values::{f32_values, TensorValuesError};
 pub use testdata::test_data_dir;

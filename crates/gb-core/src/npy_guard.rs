@@ -77,7 +77,10 @@ fn check_shapes(text: &str) -> Result<(), String> {
                     continue;
                 }
                 count = count.checked_mul(d).ok_or_else(|| {
-                    format!("shape {}) has more elements than fit in 64 bits", dims.trim())
+                    format!(
+                        "shape {}) has more elements than fit in 64 bits",
+                        dims.trim()
+                    )
                 })?;
             }
         }
@@ -108,7 +111,8 @@ mod tests {
 
     #[test]
     fn rejects_overflowing_shapes_deep_nesting_and_short_files() {
-        let big = "{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296, 0), }";
+        let big =
+            "{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296, 0), }";
         let e = check_npy_header(&npy(big)).unwrap_err();
         assert!(e.contains("64 bits"), "{e}");
         let huge = "{'shape': [18446744073709551616], }";

@@ -24,8 +24,7 @@ use std::time::{Duration, Instant};
 
 use gb_core::BackendKind;
 use gb_diffusion::checkpoint::hub::{
-    download, resolve, resolve_cached, HubSettings, CACHE_ENV, ENDPOINT_ENV, OFFLINE_ENV,
-    TOKEN_ENV,
+    download, resolve, resolve_cached, HubSettings, CACHE_ENV, ENDPOINT_ENV, OFFLINE_ENV, TOKEN_ENV,
 };
 use gb_diffusion::distill::sd_adapter::SdPrior;
 use gb_diffusion::inpaint::InpaintPrior;
@@ -514,9 +513,7 @@ fn an_unreachable_https_hub_is_a_connection_error() {
         "{err}"
     );
     assert!(!err.to_lowercase().contains("scheme"), "{err}");
-    let err = resolve("owner/tiny-sd", &settings)
-        .unwrap_err()
-        .to_string();
+    let err = resolve("owner/tiny-sd", &settings).unwrap_err().to_string();
     assert!(
         err.contains(&format!("downloading it from {endpoint} failed"))
             && err.contains("Connection Failed"),
@@ -536,9 +533,15 @@ fn a_missing_file_is_an_error_naming_the_file_and_url() {
         "{}/owner/broken/resolve/{COMMIT}/{FULL_VAE}",
         server.endpoint
     );
-    assert!(err.contains("owner/broken") && err.contains(FULL_VAE), "{err}");
+    assert!(
+        err.contains("owner/broken") && err.contains(FULL_VAE),
+        "{err}"
+    );
     assert!(err.contains(&url), "{err}");
-    assert!(err.contains("HTTP 404") && err.contains("Entry not found"), "{err}");
+    assert!(
+        err.contains("HTTP 404") && err.contains("Entry not found"),
+        "{err}"
+    );
     // An incomplete snapshot is not published under refs/main, nor taken from the cache.
     let repo_dir = cache.path().join("models--owner--broken");
     assert!(!repo_dir.join("refs/main").exists());

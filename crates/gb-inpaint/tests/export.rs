@@ -65,7 +65,7 @@ fn export_reads_back_with_the_same_cameras_renders_and_orbit() {
     let method = MethodConfig::builtin("none").unwrap();
     let mut trainer = GuidedTrainer::new(&scene, config, method, None, BackendKind::Flex).unwrap();
     for _ in 0..2 {
-        gb_nerf::train::Trainer::train_step(&mut trainer);
+        gb_nerf::train::Trainer::train_step(&mut trainer).unwrap();
     }
 
     let out = dir.path().join("export");

@@ -170,7 +170,12 @@ impl Model {
     }
 
     fn check_svr(&self, svr: &RbfSvr) -> Result<(), TestCaseError> {
-        let svs: Vec<f64> = self.expanded().concat().into_iter().map(f64::from).collect();
+        let svs: Vec<f64> = self
+            .expanded()
+            .concat()
+            .into_iter()
+            .map(f64::from)
+            .collect();
         ensure(
             svr.gamma == self.gamma
                 && svr.rho == self.rho

@@ -209,7 +209,10 @@ impl ValidLora {
 fn check_entries(file: &LoraFile) -> Result<(), TestCaseError> {
     for e in &file.entries {
         ensure(e.down_shape.len() >= 2 && e.up_shape.len() >= 2, || {
-            format!("{}: factor shapes {:?} {:?}", e.key, e.down_shape, e.up_shape)
+            format!(
+                "{}: factor shapes {:?} {:?}",
+                e.key, e.down_shape, e.up_shape
+            )
         })?;
         ensure(e.rank() >= 1, || format!("{}: rank 0 accepted", e.key))?;
         ensure(
@@ -246,7 +249,9 @@ pub fn file(h: &mut Harness) -> Result<(), String> {
         let got = LoraFile::read(&path);
         let expected = match &case {
             LoraCase::Valid(v, m) if m.is_empty() && v.invalid() => {
-                return ensure(got.is_err(), || "rank 0 or non-finite alpha accepted".into());
+                return ensure(got.is_err(), || {
+                    "rank 0 or non-finite alpha accepted".into()
+                });
             }
             LoraCase::Valid(v, m) if m.is_empty() => v.expected(),
             _ => {
@@ -317,8 +322,18 @@ fn key() -> impl Strategy<Value = String> {
 /// Arbitrary adapter metadata: JSON-ish text with the PEFT keys and odd values.
 fn metadata() -> impl Strategy<Value = Option<String>> {
     let value = proptest::sample::select(vec![
-        "4", "0", "-1", "1e308", "\"x\"", "true", "null", "[]", "{\"m\": 2}", "{\"m\": \"x\"}",
-        "1e999", "[[[[[[[[",
+        "4",
+        "0",
+        "-1",
+        "1e308",
+        "\"x\"",
+        "true",
+        "null",
+        "[]",
+        "{\"m\": 2}",
+        "{\"m\": \"x\"}",
+        "1e999",
+        "[[[[[[[[",
     ]);
     let entry = (
         proptest::sample::select(vec![
@@ -341,11 +356,8 @@ fn metadata() -> impl Strategy<Value = Option<String>> {
 
 /// `LoraFile::read` on files whose keys, dtypes, shapes and metadata are arbitrary.
 pub fn keys(h: &mut Harness) -> Result<(), String> {
-    let tensors = proptest::collection::btree_map(
-        key(),
-        super::safetensors_files::any_tensor(),
-        0..6,
-    );
+    let tensors =
+        proptest::collection::btree_map(key(), super::safetensors_files::any_tensor(), 0..6);
     h.check((tensors, metadata()), |(tensors, meta), dir| {
         let meta = meta.map(|m| HashMap::from([("lora_adapter_metadata".to_string(), m)]));
         let path = write(dir, "keys.safetensors", &serialize(&tensors, meta));

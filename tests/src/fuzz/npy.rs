@@ -167,9 +167,23 @@ fn valid_npy() -> impl Strategy<Value = ValidNpy> {
 
 fn header_case() -> impl Strategy<Value = NpyCase> {
     let descr = proptest::sample::select(vec![
-        "'<f4'", "'<f8'", "'>f4'", "'|f4'", "'<f2'", "'<f16'", "'<i4'", "'|u1'", "'|b1'",
-        "'<c16'", "'|V0'", "'<f99999999999999999999'", "'zz'", "[('a', '<f4')]",
-        "[('a', '<f4', (4294967296, 4294967296))]", "[]", "3",
+        "'<f4'",
+        "'<f8'",
+        "'>f4'",
+        "'|f4'",
+        "'<f2'",
+        "'<f16'",
+        "'<i4'",
+        "'|u1'",
+        "'|b1'",
+        "'<c16'",
+        "'|V0'",
+        "'<f99999999999999999999'",
+        "'zz'",
+        "[('a', '<f4')]",
+        "[('a', '<f4', (4294967296, 4294967296))]",
+        "[]",
+        "3",
     ]);
     let dim = prop_oneof![
         4 => (0u64..6).prop_map(|d| d.to_string()),
@@ -259,7 +273,10 @@ pub fn nerf(h: &mut Harness) -> Result<(), String> {
             ensure(a.shape == v.shape, || format!("shape {:?}", a.shape))?;
             ensure(
                 a.data.len() == v.values.len()
-                    && a.data.iter().zip(&v.values).all(|(x, y)| same(*x as f32, *y)),
+                    && a.data
+                        .iter()
+                        .zip(&v.values)
+                        .all(|(x, y)| same(*x as f32, *y)),
                 || format!("values {:?}", a.data),
             )?;
         } else if let Ok(a) = got {

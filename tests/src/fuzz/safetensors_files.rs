@@ -154,8 +154,8 @@ pub fn hand_made_file() -> impl Strategy<Value = Vec<u8>> {
     let entry = (
         prop_oneof![Just("w".to_string()), any_short_string()],
         proptest::sample::select(vec![
-            "F32", "F16", "BF16", "F64", "I64", "I32", "U8", "BOOL", "F4", "F6_E2M3",
-            "F8_E5M2", "C64", "U64", "XX", "",
+            "F32", "F16", "BF16", "F64", "I64", "I32", "U8", "BOOL", "F4", "F6_E2M3", "F8_E5M2",
+            "C64", "U64", "XX", "",
         ]),
         proptest::collection::vec(dim, 0..5),
         (0u64..64, 0u64..64),
@@ -248,8 +248,7 @@ pub fn write(dir: &Path, name: &str, bytes: &[u8]) -> std::path::PathBuf {
 
 fn same(a: &[f32], b: &[f32]) -> bool {
     a.len() == b.len()
-        && a
-            .iter()
+        && a.iter()
             .zip(b)
             .all(|(x, y)| x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()))
 }
@@ -316,7 +315,9 @@ pub fn fid(h: &mut Harness) -> Result<(), String> {
                 )?,
                 (Dtype::F32, Err(e)) => return Err(TestCaseError::fail(format!("{name}: {e}"))),
                 (other, Ok(_)) => {
-                    return Err(TestCaseError::fail(format!("{name}: {other:?} read as F32")))
+                    return Err(TestCaseError::fail(format!(
+                        "{name}: {other:?} read as F32"
+                    )))
                 }
                 (_, Err(_)) => {}
             }

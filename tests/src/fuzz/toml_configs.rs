@@ -72,9 +72,9 @@ impl Case {
     /// The text to parse (`None` for [`Case::Values`], which the property serialises).
     fn text(&self, texts: &[&str]) -> Option<String> {
         match self {
-            Case::Text(i, m) => Some(
-                String::from_utf8_lossy(&mutated(texts[i % texts.len()].as_bytes(), m)).into(),
-            ),
+            Case::Text(i, m) => {
+                Some(String::from_utf8_lossy(&mutated(texts[i % texts.len()].as_bytes(), m)).into())
+            }
             Case::Raw(b) => Some(String::from_utf8_lossy(b).into()),
             Case::Values(..) => None,
         }

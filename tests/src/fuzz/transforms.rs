@@ -140,7 +140,9 @@ pub fn load(h: &mut Harness) -> Result<(), String> {
             return Ok(());
         }
         let scene = got.map_err(|e| TestCaseError::fail(format!("valid file rejected: {e}")))?;
-        ensure(scene.views.len() == 1, || format!("{} views", scene.views.len()))?;
+        ensure(scene.views.len() == 1, || {
+            format!("{} views", scene.views.len())
+        })?;
         let cam = &scene.views[0].camera;
         let close = |a: f32, b: f64| (f64::from(a) - b).abs() <= 1e-5 * b.abs().max(1.0);
         ensure(

@@ -78,7 +78,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let result = write_pairs(&data, &tmp, args.images).and_then(|(pred_dir, gt_dir)| {
         let weights = data.join("weights").join(StLpips::WEIGHTS_FILE);
         let rust = time_rust(&pred_dir, &gt_dir, &weights, device, args.repeats)?;
-        Ok((rust, time_python(&python, &args, &pred_dir, &gt_dir, &weights)))
+        Ok((
+            rust,
+            time_python(&python, &args, &pred_dir, &gt_dir, &weights),
+        ))
     });
     // Best effort: a leftover temporary folder is harmless.
     let _ = std::fs::remove_dir_all(&tmp);

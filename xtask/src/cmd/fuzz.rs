@@ -32,7 +32,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .filter(|r| args.only.as_deref().is_none_or(|o| r.name.contains(o)))
         .collect();
     if readers.is_empty() {
-        bail!("--only {:?} matches no reader", args.only.unwrap_or_default());
+        bail!(
+            "--only {:?} matches no reader",
+            args.only.unwrap_or_default()
+        );
     }
     let mut rows = Vec::new();
     let mut failed = Vec::new();

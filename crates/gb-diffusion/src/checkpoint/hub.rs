@@ -169,9 +169,7 @@ pub fn download_variant(
     }
     if settings.offline {
         return resolve_cached(spec, &settings.cache_dir).map_err(|e| match e {
-            CheckpointError::Hub { message, .. } => {
-                hub_error(spec, offline_message(&message, id))
-            }
+            CheckpointError::Hub { message, .. } => hub_error(spec, offline_message(&message, id)),
             other => other,
         });
     }
@@ -239,7 +237,10 @@ mod tests {
         let err = resolve_cached("owner/tiny-sd", cache.path())
             .unwrap_err()
             .to_string();
-        assert!(err.contains("incomplete") && err.contains("`unet/`"), "{err}");
+        assert!(
+            err.contains("incomplete") && err.contains("`unet/`"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -249,7 +250,9 @@ mod tests {
         settings.offline = true;
         // An endpoint nothing listens on: any network call would fail differently.
         settings.endpoint = "http://127.0.0.1:1".into();
-        let err = resolve("owner/not-cached", &settings).unwrap_err().to_string();
+        let err = resolve("owner/not-cached", &settings)
+            .unwrap_err()
+            .to_string();
         assert!(
             err.contains("owner/not-cached")
                 && err.contains(OFFLINE_ENV)
@@ -278,6 +281,9 @@ mod tests {
         let err = download("not-an-id", &HubSettings::with_cache_dir("/nonexistent"))
             .unwrap_err()
             .to_string();
-        assert!(err.contains("not-an-id") && err.contains("owner/name"), "{err}");
+        assert!(
+            err.contains("not-an-id") && err.contains("owner/name"),
+            "{err}"
+        );
     }
 }

@@ -224,7 +224,11 @@ impl BlockParser<'_> {
 }
 
 fn too_deep(path: &Path, line: usize) -> BrisqueError {
-    parse_err(path, line, format!("nested more than {MAX_DEPTH} levels deep"))
+    parse_err(
+        path,
+        line,
+        format!("nested more than {MAX_DEPTH} levels deep"),
+    )
 }
 
 /// Drops a leading tag such as `!!opencv-matrix` or `!<tag:...>`.

@@ -139,9 +139,10 @@ fn publish_ref(cache_dir: &Path, id: &str, revision: &str, commit: &str) -> Resu
     let cache = Cache::new(cache_dir.to_path_buf());
     let repo = Repo::with_revision(id.to_string(), RepoType::Model, revision.to_string());
     let refs = repo_dir(cache_dir, id).join("refs");
-    cache.repo(repo).create_ref(commit).map_err(|e| {
-        Failure::Other(format!("writing {}: {e}", refs.join(revision).display()))
-    })?;
+    cache
+        .repo(repo)
+        .create_ref(commit)
+        .map_err(|e| Failure::Other(format!("writing {}: {e}", refs.join(revision).display())))?;
     if revision != commit {
         // Best effort: a leftover ref naming its own commit is harmless.
         let _ = std::fs::remove_file(refs.join(commit));
@@ -172,9 +173,9 @@ fn describe(err: ApiError, what: &str) -> Failure {
                         response.get_url()
                     )))
                 }
-                None => Failure::Unreachable(one_line(format!(
-                    "{what}: cannot reach the hub: {text}"
-                ))),
+                None => {
+                    Failure::Unreachable(one_line(format!("{what}: cannot reach the hub: {text}")))
+                }
             }
         }
         ApiError::TooManyRetries(inner) => describe(*inner, what),

@@ -65,7 +65,12 @@ pub fn select_files(
             WeightVariant::Auto => fp16,
         };
         if chosen.is_empty() && WEIGHTED_COMPONENTS.contains(&component.as_str()) {
-            return Err(missing_weights(&component, &direct, has_safetensors, variant));
+            return Err(missing_weights(
+                &component,
+                &direct,
+                has_safetensors,
+                variant,
+            ));
         }
         out.extend(chosen);
     }
@@ -219,7 +224,10 @@ mod tests {
         std::fs::create_dir_all(dir.path().join("unet")).unwrap();
         std::fs::write(dir.path().join("unet/config.json"), "{}").unwrap();
         let gap = snapshot_gap(dir.path()).unwrap();
-        assert!(gap.contains("`unet/`") && gap.contains("safetensors"), "{gap}");
+        assert!(
+            gap.contains("`unet/`") && gap.contains("safetensors"),
+            "{gap}"
+        );
         std::fs::write(dir.path().join("unet/w.safetensors"), "x").unwrap();
         assert_eq!(snapshot_gap(dir.path()), None);
     }

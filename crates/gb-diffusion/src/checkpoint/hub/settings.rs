@@ -74,11 +74,9 @@ impl HubSettings {
     /// folder given (no progress bars).
     pub fn from_vars(var: impl Fn(&str) -> Option<String>, home: Option<PathBuf>) -> Self {
         let set = |name: &str| var(name).filter(|v| !v.trim().is_empty());
-        let hf_home = set(HOME_ENV).map(PathBuf::from).unwrap_or_else(|| {
-            home.unwrap_or_default()
-                .join(".cache")
-                .join("huggingface")
-        });
+        let hf_home = set(HOME_ENV)
+            .map(PathBuf::from)
+            .unwrap_or_else(|| home.unwrap_or_default().join(".cache").join("huggingface"));
         let cache_dir = set(CACHE_ENV)
             .map(PathBuf::from)
             .unwrap_or_else(|| hf_home.join("hub"));
