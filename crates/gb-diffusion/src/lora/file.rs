@@ -147,6 +147,9 @@ impl LoraFile {
                     "rank mismatch: down {down_shape:?}, up {up_shape:?}"
                 )));
             }
+            if down_shape[0] == 0 {
+                return Err(bad("rank 0: the factors hold no update"));
+            }
             let rank = down_shape[0] as f64;
             let peft = settings.get(&component);
             let alpha = p
@@ -154,6 +157,9 @@ impl LoraFile {
                 .or_else(|| peft.and_then(|s| pattern_alpha(&s.alpha_pattern, &module)))
                 .or_else(|| peft.and_then(|s| s.lora_alpha))
                 .unwrap_or(rank);
+            if !alpha.is_finite() {
+                return Err(bad(&format!("alpha {alpha} is not finite")));
+            }
             let rslora = peft.is_some_and(|s| s.use_rslora);
             let scale = if rslora {
                 alpha / rank.sqrt()
