@@ -72,7 +72,9 @@ fn check_shapes(text: &str) -> Result<(), String> {
                 if token.is_empty() {
                     continue;
                 }
-                let d = token.parse::<u64>().unwrap_or(u64::MAX);
+                let d = token
+                    .parse::<u64>()
+                    .map_err(|_| format!("shape dimension {token} does not fit in 64 bits"))?;
                 if d == 0 {
                     continue;
                 }

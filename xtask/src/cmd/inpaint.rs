@@ -463,12 +463,14 @@ pub fn run_inpaint(args: &Args) -> anyhow::Result<serde_json::Value> {
     };
     let eval_seconds = eval_start.elapsed().as_secs_f64();
     let orbit = gb_inpaint::gif::write_orbit(&args.out, &scene, &trainer, args.orbit_frames)?;
-    let export = gb_inpaint::export::write_export(
+    let mut export = gb_inpaint::export::write_export(
         &args.out.join("export"),
         &scene,
         &trainer,
         args.orbit_frames,
     )?;
+    // relative to the run folder, like `report`: metrics.json does not depend on where it lies
+    export.folder = PathBuf::from("export");
     let mean = |i: usize| (counts[i] > 0).then(|| sums[i] / counts[i] as f64);
     let per_step = |secs: f64, n: usize| (n > 0).then(|| secs / n as f64);
     let metrics = json!({
