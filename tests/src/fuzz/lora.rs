@@ -137,6 +137,9 @@ impl Pair {
     }
 }
 
+/// `(component, module, kohya, down, up, scale)` of one pair as the reader must give it.
+type ExpectedPair = (LoraComponent, String, bool, Vec<f32>, Vec<f32>, f64);
+
 impl ValidLora {
     /// Whether the reader must reject the file: a rank-0 pair or a non-finite kohya alpha.
     fn invalid(&self) -> bool {
@@ -177,7 +180,7 @@ impl ValidLora {
     }
 
     /// `(component, module, kohya, down, up, scale)` of each pair as the reader must give it.
-    fn expected(&self) -> Vec<(LoraComponent, String, bool, Vec<f32>, Vec<f32>, f64)> {
+    fn expected(&self) -> Vec<ExpectedPair> {
         self.pairs
             .iter()
             .enumerate()

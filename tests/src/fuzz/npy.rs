@@ -80,7 +80,7 @@ fn npy_bytes(version: (u8, u8), declared_len: Option<u32>, dict: &str, data: &[u
     let wide = version.0 >= 2;
     let prefix = if wide { 12 } else { 10 };
     let mut text = dict.to_string();
-    while (prefix + text.len() + 1) % 64 != 0 {
+    while !(prefix + text.len() + 1).is_multiple_of(64) {
         text.push(' ');
     }
     text.push('\n');
