@@ -7,6 +7,7 @@ SD-1.5-inpainting size (random weights) for the requested latent size and batch,
 VAE encoder forward+backward seconds at the requested image sizes.
 
     python tools/bench/unet_bench.py --latent 32 --batch 2 --vae-sizes 256 --threads 2 --repeats 2
+    python tools/bench/unet_bench.py --latent 64 --vae-sizes 512 --device cuda --fp16   # bench gpu
 """
 import argparse
 import json
@@ -49,6 +50,7 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--device", default="cpu")
+    ap.add_argument("--fp16", action="store_true", help="also time the U-Net in float16 (GPU)")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
     torch.manual_seed(0)
@@ -71,6 +73,20 @@ def main():
             times.append(time.perf_counter() - s)
     out["unet_forward_s"] = min(times[1:])
     out["unet_params"] = sum(p.numel() for p in unet.parameters())
+    if a.fp16:
+        unet16 = unet.half()
+        x16, ehs16, t16 = x.half(), ehs.half(), t.half()
+        times = []
+        with torch.no_grad():
+            for _ in range(a.repeats + 1):
+                if dev.type == "cuda":
+                    torch.cuda.synchronize()
+                s = time.perf_counter()
+                unet16(x16, t16, encoder_hidden_states=ehs16)
+                if dev.type == "cuda":
+                    torch.cuda.synchronize()
+                times.append(time.perf_counter() - s)
+        out["unet_forward_fp16_s"] = min(times[1:])
     out["unet_peak_rss_mb"] = peak_rss_mb()
     if dev.type == "cuda":
         out["unet_peak_gpu_mb"] = torch.cuda.max_memory_allocated() / 2**20

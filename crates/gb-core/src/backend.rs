@@ -80,6 +80,13 @@ impl FromStr for BackendKind {
     }
 }
 
+/// Whether `device` computes on a GPU card: false for the CPU backends (flex, ndarray) and for
+/// a wgpu device on a software rasterizer such as Mesa's lavapipe, which reports no physical
+/// device. Opens the device.
+pub fn is_gpu_card(device: &Device) -> bool {
+    device.identity().is_some_and(|id| id.physical.is_some())
+}
+
 /// The backends a multi-backend test should visit.
 ///
 /// All three by default; CI installs Mesa's lavapipe so wgpu really runs. A developer

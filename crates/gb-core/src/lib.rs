@@ -1,12 +1,13 @@
 //! Shared plumbing used by every gb-nerf-rs crate: run-time backend selection
 //! ([`backend`]), crash-safe file writes ([`atomic`]), PNG/JPEG image IO ([`image_io`]),
-//! progress bars that do not fight the log ([`progress`]) and one-line error messages
-//! ([`messages`]).
+//! progress bars that do not fight the log ([`progress`]), one-line error messages
+//! ([`messages`]) and row lookups with a parallel backward ([`indexing`]).
 
 pub mod assets;
 pub mod atomic;
 pub mod backend;
 pub mod image_io;
+pub mod indexing;
 pub mod messages;
 pub mod npy_guard;
 pub mod progress;
@@ -18,6 +19,7 @@ pub use assets::{assets_dir, tiny_prior_dir};
 pub use atomic::write_atomic;
 pub use backend::{heavy_test_backends, test_backends, BackendKind};
 pub use image_io::{read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage};
+pub use indexing::gather_rows;
 pub use npy_guard::check_npy_header;
 pub use tensor_values::{f32_values, TensorValuesError};
 pub use testdata::test_data_dir;

@@ -292,7 +292,8 @@ fn render_pixels(
 }
 
 /// `[N, C]` values of the rows `rows` of an `R x R` image, other rows zero, as
-/// `[1, C, R, R]` (differentiable: a gather).
+/// `[1, C, R, R]` (differentiable: a gather with a parallel backward,
+/// [`gb_core::gather_rows`]).
 fn scatter_rows(values: Tensor<2>, rows: &[usize], r: usize) -> Tensor<4> {
     let device = values.device();
     let [n, c] = values.dims();
@@ -301,8 +302,8 @@ fn scatter_rows(values: Tensor<2>, rows: &[usize], r: usize) -> Tensor<4> {
         map[row] = k as i64;
     }
     let padded = Tensor::cat(vec![values, Tensor::zeros([1, c], &device)], 0);
-    let dense = padded.select(
-        0,
+    let dense = gb_core::gather_rows(
+        padded,
         Tensor::<1, Int>::from_data(TensorData::new(map, [r * r]), &device),
     );
     dense.reshape([r, r, c]).permute([2, 0, 1]).unsqueeze_dim(0)

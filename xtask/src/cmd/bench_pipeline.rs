@@ -80,14 +80,15 @@ fn sd15_text_encoder() -> ClipTextConfig {
 }
 
 /// Polls `nvidia-smi` for the GPU memory in use (MiB) until dropped; `None` without one.
-struct GpuMemoryPoll {
+pub struct GpuMemoryPoll {
     child: std::process::Child,
     peak: Arc<AtomicU64>,
     first: Arc<AtomicU64>,
 }
 
 impl GpuMemoryPoll {
-    fn start() -> Option<Self> {
+    /// Starts polling; `None` without `nvidia-smi`.
+    pub fn start() -> Option<Self> {
         let mut child = std::process::Command::new("nvidia-smi")
             .args([
                 "--query-gpu=memory.used",
@@ -118,7 +119,7 @@ impl GpuMemoryPoll {
     }
 
     /// `(at start, peak)` in MiB.
-    fn read(&self) -> (Option<u64>, u64) {
+    pub fn read(&self) -> (Option<u64>, u64) {
         let first = self.first.load(Ordering::Relaxed);
         (
             (first != u64::MAX).then_some(first),
@@ -384,7 +385,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// The GPU's name from `nvidia-smi`, when there is one.
-fn gpu_name() -> Option<String> {
+pub fn gpu_name() -> Option<String> {
     let out = std::process::Command::new("nvidia-smi")
         .args(["--query-gpu=name,driver_version", "--format=csv,noheader"])
         .output()

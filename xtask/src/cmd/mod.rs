@@ -3,6 +3,7 @@
 pub mod ablate;
 pub mod bench;
 pub mod bench_eval;
+pub mod bench_gpu;
 pub mod bench_nerf;
 pub mod bench_pipeline;
 pub mod bench_python;

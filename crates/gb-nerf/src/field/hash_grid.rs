@@ -13,8 +13,9 @@
 //! - the output is the level features concatenated: `levels * features` values per point.
 //!
 //! Unlike instant-ngp every level owns a full table of `T` rows (simpler addressing, same
-//! values). The lookups (indices and weights) are computed where [`LookupSite`] says:
-//! - `host` (the default): a loop on the CPU ([`hash_lookups`], [`HashGrid::encode`]), then
+//! values). The lookups (indices and weights) are computed where [`LookupSite`] says
+//! (`auto`, the default, picks `device` on a GPU card and `host` elsewhere):
+//! - `host`: a loop on the CPU ([`hash_lookups`], [`HashGrid::encode`]), then
 //!   an upload of `levels * 8` rows and weights per point (1.5 KB with 16 levels);
 //! - `device`: tensor operations on the compute device from the uploaded points, 12 bytes
 //!   per point ([`HashGrid::encode_points`]), bit-identical to the host loop.
@@ -45,23 +46,39 @@ pub struct HashGridConfig {
     pub base_resolution: f32,
     /// Finest grid resolution (reference: 2048 times the scene bound; 512 for a unit box).
     pub max_resolution: f32,
-    /// Where the rows and weights are computed (TOML `lookups = "host"` or `"device"`).
+    /// Where the rows and weights are computed (TOML `lookups = "auto"`, `"host"` or
+    /// `"device"`).
     #[serde(default)]
     pub lookups: LookupSite,
 }
 
-/// Where a hash grid computes its lookups (rows and trilinear weights); both give the same
-/// encoding bit for bit.
+/// Where a hash grid computes its lookups (rows and trilinear weights); every site gives the
+/// same encoding bit for bit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LookupSite {
-    /// A loop on the host, then an upload of `levels * 8` rows and weights per point (the
-    /// default: fastest on the CPU backends, and on lavapipe).
+    /// `device` on a GPU card, `host` on the CPU backends and on software rasterizers such as
+    /// lavapipe (the default; [`LookupSite::resolve`]).
     #[default]
+    Auto,
+    /// A loop on the host, then an upload of `levels * 8` rows and weights per point
+    /// (fastest on the CPU backends, and on lavapipe).
     Host,
     /// Tensor operations on the compute device from the uploaded points (12 bytes per
-    /// point): meant for discrete GPUs, where the host loop and the upload dominate.
+    /// point): meant for GPUs, where the host loop and the upload dominate.
     Device,
+}
+
+impl LookupSite {
+    /// The site used on `device`: `auto` becomes `device` when `device` runs on a GPU card
+    /// ([`gb_core::backend::is_gpu_card`]) and `host` otherwise; the others stay.
+    pub fn resolve(self, device: &Device) -> LookupSite {
+        match self {
+            LookupSite::Auto if gb_core::backend::is_gpu_card(device) => LookupSite::Device,
+            LookupSite::Auto => LookupSite::Host,
+            site => site,
+        }
+    }
 }
 
 impl HashGridConfig {
@@ -196,7 +213,7 @@ impl HashGrid {
             TensorData::new(lookups.weights.clone(), [n, l, 8, 1]),
             &device,
         );
-        let gathered = table.select(0, rows).reshape([n, l, 8, f]);
+        let gathered = gb_core::gather_rows(table, rows).reshape([n, l, 8, f]);
         (gathered * w).sum_dim(2).reshape([n, l * f])
     }
 
@@ -274,7 +291,7 @@ impl HashGrid {
         let index = (dense_index * dense_t.clone() + hashed * dense_t.neg().add_scalar(1))
             .bitwise_and_scalar(t - 1);
         let rows = (index + per_level_i(offset)).reshape([n * levels * 8]);
-        let gathered = table.select(0, rows).reshape([n, levels, 8, feats]);
+        let gathered = gb_core::gather_rows(table, rows).reshape([n, levels, 8, feats]);
         (gathered * w).sum_dim(2).reshape([n, levels * feats])
     }
 }
@@ -379,14 +396,45 @@ mod tests {
     }
 
     #[test]
-    fn the_lookup_site_is_read_from_toml_and_defaults_to_host() {
+    fn the_lookup_site_is_read_from_toml_and_defaults_to_auto() {
         let base = "levels = 2\nfeatures_per_level = 2\nlog2_table_size = 8\n\
                     base_resolution = 4.0\nmax_resolution = 16.0\n";
         let c: HashGridConfig = toml::from_str(base).unwrap();
+        assert_eq!(c.lookups, LookupSite::Auto);
+        let c: HashGridConfig = toml::from_str(&format!("{base}lookups = \"host\"\n")).unwrap();
         assert_eq!(c.lookups, LookupSite::Host);
         let c: HashGridConfig = toml::from_str(&format!("{base}lookups = \"device\"\n")).unwrap();
         assert_eq!(c.lookups, LookupSite::Device);
         assert!(toml::from_str::<HashGridConfig>(&format!("{base}lookups = \"gpu\"\n")).is_err());
+    }
+
+    /// `auto` computes on the host on the CPU backends and on lavapipe (no GPU card: the CI
+    /// machine), and explicit sites are kept on every backend.
+    #[test]
+    fn auto_lookups_stay_on_the_host_without_a_gpu_card() {
+        for kind in gb_core::test_backends() {
+            let device = kind.device();
+            let card = gb_core::backend::is_gpu_card(&device);
+            if kind != gb_core::BackendKind::Wgpu {
+                assert!(!card, "{kind} is a CPU backend");
+            }
+            let want = if card {
+                LookupSite::Device
+            } else {
+                LookupSite::Host
+            };
+            assert_eq!(LookupSite::Auto.resolve(&device), want, "{kind}");
+            assert_eq!(
+                LookupSite::Host.resolve(&device),
+                LookupSite::Host,
+                "{kind}"
+            );
+            assert_eq!(
+                LookupSite::Device.resolve(&device),
+                LookupSite::Device,
+                "{kind}"
+            );
+        }
     }
 
     #[test]

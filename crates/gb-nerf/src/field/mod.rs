@@ -144,9 +144,9 @@ impl NerfField {
     fn trunk(&self, points: &[[f32; 3]]) -> Tensor<2> {
         let device = self.device();
         let enc = match &self.grid {
-            Some(grid) => match grid.config.lookups {
-                LookupSite::Host => grid.encode(points),
+            Some(grid) => match grid.config.lookups.resolve(&device) {
                 LookupSite::Device => grid.encode_points(points_tensor(points, &device)),
+                _ => grid.encode(points),
             },
             None => {
                 let freqs = match &self.config {

@@ -17,7 +17,8 @@ pub use normals::{depth_to_normals, normals_to_image, Intrinsics, PlaneFitConfig
 pub use volume::{composite, Background, VolumeOutput};
 
 /// Expands per-sample values `[M, C]` of the evaluated samples to the dense `[R * S, C]`
-/// layout, with zeros for the skipped samples (differentiable: a gather).
+/// layout, with zeros for the skipped samples (differentiable: a gather, whose backward is
+/// parallel on every backend; see [`gb_core::gather_rows`]).
 fn expand_dense<const D: usize>(values: Tensor<D>, samples: &SampleSet) -> Tensor<D> {
     let device = values.device();
     let m = samples.slots.len();
@@ -29,8 +30,8 @@ fn expand_dense<const D: usize>(values: Tensor<D>, samples: &SampleSet) -> Tenso
     let mut zero_shape = values.dims();
     zero_shape[0] = 1;
     let padded = Tensor::cat(vec![values, Tensor::zeros(zero_shape, &device)], 0);
-    padded.select(
-        0,
+    gb_core::gather_rows(
+        padded,
         Tensor::<1, Int>::from_data(TensorData::new(map, [dense]), &device),
     )
 }

@@ -1,0 +1,84 @@
+//! `cargo xtask bench gpu --smoke` end to end: the command the GPU machine runs, at tiny sizes.
+//! It runs on flex, and on wgpu with `GB_TEST_HEAVY_WGPU=1` (a whole prior and NeRF on
+//! lavapipe spend minutes autotuning; see `gb_core::heavy_test_backends`). The report
+//! holds every section with positive times, a pipeline step whose phases add up, the 10k-step
+//! projection from that step, and NeRF speeds on the device and on flex with their ratio.
+
+use gb_core::BackendKind;
+use gb_tests::xtask;
+
+#[test]
+fn gpu_bench_smoke_writes_every_section() {
+    let device = if gb_core::heavy_test_backends().contains(&BackendKind::Wgpu) {
+        "wgpu"
+    } else {
+        "flex"
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("gpu-smoke.json");
+    let run = xtask(&[
+        "bench",
+        "gpu",
+        "--smoke",
+        "--device",
+        device,
+        "--out",
+        path.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "bench gpu --smoke failed: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!(doc["smoke"], true);
+    assert_eq!(doc["device"], device);
+    assert!(doc["machine"]["cpu"].is_string());
+    let positive = |v: &serde_json::Value, what: &str| {
+        let s = v.as_f64().unwrap_or_else(|| panic!("{what}: {v}"));
+        assert!(s > 0.0 && s.is_finite(), "{what}: {s}");
+        s
+    };
+    positive(&doc["unet"]["unet_forward_f32_s"], "unet f32");
+    assert_eq!(doc["unet"]["latent"], 8);
+    assert!(doc["unet"]["unet_forward_f16_s"].is_null());
+    assert!(doc["unet"]["unet_f16_status"].is_string());
+    positive(&doc["vae_encoder"]["vae_encoder_fwd_bwd_s"], "vae");
+    assert_eq!(doc["diffusers"]["skipped"], "--smoke");
+
+    let step = &doc["pipeline_step"];
+    assert!(step["steps_failed"].is_null(), "{}", step["steps_failed"]);
+    assert_eq!(step["prior"], "tiny");
+    assert_eq!(step["device"], device);
+    let step_s = positive(&step["step_s_median"], "step");
+    let sum: f64 = step["phases_s_median"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|v| v.as_f64().unwrap())
+        .sum();
+    assert!(
+        (sum - step_s).abs() <= 1e-9 * step_s.max(1.0),
+        "{sum} vs {step_s}"
+    );
+    let projected = positive(&doc["projected_10k_steps_s"], "projection");
+    assert!((projected - 10_000.0 * step_s).abs() <= 1e-9 * projected);
+
+    let rows = doc["nerf"]["presets"].as_array().unwrap();
+    assert_eq!(rows.len(), 1);
+    assert_eq!(rows[0]["preset"], "fast");
+    let on_device = positive(&rows[0]["steps_per_s"][device], "nerf device");
+    let on_flex = positive(&rows[0]["steps_per_s"]["flex"], "nerf flex");
+    let ratio = positive(&rows[0]["device_over_flex"], "ratio");
+    assert!((ratio - on_device / on_flex).abs() <= 1e-9 * ratio);
+    positive(&doc["wall_s"], "wall");
+}
+
+#[test]
+fn gpu_bench_refuses_an_unknown_device_naming_the_flag() {
+    let run = xtask(&["bench", "gpu", "--smoke", "--device", "cuda"]);
+    assert!(!run.status.success());
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(err.contains("--device"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}

@@ -1,0 +1,407 @@
+//! `cargo xtask bench gpu [--smoke] [--out FILE]`: every GPU figure of the project in one
+//! file, in one command sized for a short lease of a fresh GPU machine.
+//!
+//! Without `--smoke` (on the GPU machine) it first makes what it needs:
+//! - the Vulkan loader (`libvulkan1`, through apt when missing; the NVIDIA driver brings its
+//!   own ICD) and a venv with the pinned torch and diffusers (`tools/bench/gpu_setup.sh`);
+//! - a release build: from a debug build it re-runs itself with `cargo run --release`.
+//!
+//! Then it measures, on `--device` (wgpu by default):
+//! - the U-Net forward at SD-1.5-inpainting shapes (batch 2, 64x64 latent, random weights),
+//!   against diffusers fp32 and fp16 on the same GPU in the same run
+//!   (`tools/bench/unet_bench.py --device cuda --fp16`), with the ratios;
+//! - the VAE encoder forward and backward at 512 px, against diffusers;
+//! - one full gb-nerf step at the `paper` preset with an SD-1.5-sized prior, split into NeRF,
+//!   U-Net and VAE (`bench pipeline`), and the projected 10k-step time;
+//! - NeRF `fast` and `balanced` steps/s on the device against flex on this machine's cores;
+//! - the peak GPU memory (`nvidia-smi`) over the whole run.
+//!
+//! `--smoke` runs the same code at tiny sizes (the built-in tiny prior's U-Net and VAE, its
+//! prior in the pipeline step, a few NeRF steps, no Python reference, no setup), on any
+//! device, lavapipe included, so that GPU time is never spent finding a bug.
+//!
+//! The U-Net runs in f32 only: the frozen prior has no f16 path yet, so the f16 entries name
+//! that instead of a time.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use burn::module::Module;
+use burn::tensor::{Distribution, Tensor};
+use gb_core::BackendKind;
+use gb_diffusion::config::{AutoencoderKLConfig, UNet2DConditionConfig};
+use gb_diffusion::models::{AutoencoderKL, UNet2DConditionModel};
+use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
+use gb_nerf::scene::LoadOptions;
+use gb_nerf::train::{NerfConfig, Trainer};
+use serde_json::{json, Value};
+
+use super::bench::{machine_description, today, write_report};
+use super::bench_pipeline::GpuMemoryPoll;
+
+/// Arguments of `cargo xtask bench gpu`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Tiny sizes, no setup, no Python reference: checks the whole command on any device.
+    #[arg(long)]
+    pub smoke: bool,
+    /// The report (default: `bench/results/gpu-<gpu>-<date>.json`, or `gpu-smoke-<device>-<date>.json`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// The device measured.
+    #[arg(long, default_value = "wgpu", value_parser = super::parse::device())]
+    pub device: BackendKind,
+    /// Python with torch and diffusers for the reference (default: the venv that the setup
+    /// makes, else $GB_PYTHON, else python3); `none` skips it. Never used with `--smoke`.
+    #[arg(long)]
+    pub python: Option<PathBuf>,
+    /// Skips the setup (packages, venv) and the release re-run.
+    #[arg(long)]
+    pub no_setup: bool,
+}
+
+/// The sizes measured: SD-1.5's on a GPU, the tiny prior's in a smoke run.
+struct Sizes {
+    unet: UNet2DConditionConfig,
+    vae: AutoencoderKLConfig,
+    latent: usize,
+    vae_side: usize,
+    pipeline_prior: &'static str,
+    pipeline_preset: &'static str,
+    nerf_presets: &'static [&'static str],
+    nerf_steps: usize,
+    repeats: usize,
+}
+
+impl Sizes {
+    fn new(smoke: bool) -> anyhow::Result<Self> {
+        if smoke {
+            let tiny = gb_core::tiny_prior_dir();
+            Ok(Self {
+                unet: UNet2DConditionConfig::from_file(&tiny.join("unet/config.json"))?,
+                vae: AutoencoderKLConfig::from_file(&tiny.join("vae/config.json"))?,
+                latent: 8,
+                vae_side: 32,
+                pipeline_prior: "tiny",
+                pipeline_preset: "fast",
+                nerf_presets: &["fast"],
+                nerf_steps: 2,
+                repeats: 1,
+            })
+        } else {
+            Ok(Self {
+                unet: super::bench_unet::sd15_inpainting_unet()?,
+                vae: super::bench_unet::sd15_vae()?,
+                latent: 64,
+                vae_side: 512,
+                pipeline_prior: "sd15",
+                pipeline_preset: "paper",
+                nerf_presets: &["fast", "balanced"],
+                nerf_steps: 20,
+                repeats: 3,
+            })
+        }
+    }
+}
+
+/// Runs the benchmark (see the module docs).
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if !args.smoke && !args.no_setup {
+        return setup_then_rerun(&args);
+    }
+    let sizes = Sizes::new(args.smoke)?;
+    let gpu = GpuMemoryPoll::start();
+    let started = Instant::now();
+    let kind = args.device;
+    let reference = match (&args.python, args.smoke) {
+        (_, true) => None,
+        (Some(p), _) if p.as_os_str() == "none" => None,
+        (explicit, false) => Some(super::bench_python::reference_python(
+            explicit
+                .as_deref()
+                .or(Some(Path::new(VENV_PYTHON)).filter(|p| p.exists())),
+            &["torch", "diffusers"],
+        )?),
+    };
+
+    tracing::info!(device = %kind, smoke = args.smoke, "U-Net and VAE encoder");
+    let unet = unet_forward(&sizes, kind)?;
+    let vae = vae_encoder_fwd_bwd(&sizes, kind)?;
+    let python = match reference.as_deref() {
+        Some(py) => diffusers_reference(py, &sizes),
+        None => json!({ "skipped": if args.smoke { "--smoke" } else { "--python none" } }),
+    };
+    let ratio = |rust: f64, key: &str| -> Value {
+        match python.get(key).and_then(Value::as_f64) {
+            Some(p) if p > 0.0 => json!(rust / p),
+            _ => Value::Null,
+        }
+    };
+    let vae_key = sizes.vae_side.to_string();
+    let vae_ref = python
+        .get("vae_encoder_fwd_bwd_s")
+        .and_then(|v| v.get(&vae_key))
+        .and_then(Value::as_f64);
+
+    tracing::info!("one gb-nerf step with the prior");
+    let pipeline = pipeline_step(&sizes, kind)?;
+    tracing::info!("NeRF steps/s on the device and on flex");
+    let nerf = nerf_speed(&sizes, kind)?;
+
+    let (gpu_start, gpu_peak) = gpu.as_ref().map(|g| g.read()).unwrap_or((None, 0));
+    let gpu_label = super::bench_pipeline::gpu_name();
+    let step_s = pipeline["step_s_median"].as_f64();
+    let doc = json!({
+        "benchmark": "gpu",
+        "smoke": args.smoke,
+        "date": today(),
+        "machine": machine_description(),
+        "gpu": gpu_label,
+        "device": kind.name(),
+        "profile": if cfg!(debug_assertions) { "dev (deps at opt-level 3)" } else { "release" },
+        "unet": {
+            "shape": if args.smoke { "the tiny prior's U-Net" } else { "SD-1.5-inpainting (859.5M parameters, random weights)" },
+            "batch": 2, "latent": sizes.latent,
+            "unet_forward_f32_s": unet,
+            "unet_forward_f16_s": Value::Null,
+            "unet_f16_status": "no f16 path yet: the frozen prior loads and runs in f32",
+            "diffusers_unet_forward_fp32_s": python.get("unet_forward_s"),
+            "diffusers_unet_forward_fp16_s": python.get("unet_forward_fp16_s"),
+            "unet_f32_ratio_vs_diffusers_fp32": ratio(unet, "unet_forward_s"),
+            "unet_f16_ratio_vs_diffusers_fp16": Value::Null,
+        },
+        "vae_encoder": {
+            "side": sizes.vae_side,
+            "vae_encoder_fwd_bwd_s": vae,
+            "diffusers_vae_encoder_fwd_bwd_s": vae_ref,
+            "vae_ratio_vs_diffusers": vae_ref.filter(|p| *p > 0.0).map(|p| vae / p),
+        },
+        "pipeline_step": pipeline,
+        "projected_10k_steps_s": step_s.map(|s| s * 10_000.0),
+        "projected_10k_steps_h": step_s.map(|s| s * 10_000.0 / 3600.0),
+        "nerf": nerf,
+        "diffusers": python,
+        "gpu_memory_mib": gpu.as_ref().map(|_| json!({ "at_start": gpu_start, "peak": gpu_peak })),
+        "peak_rss_mb": super::bench::peak_rss_mb(),
+        "wall_s": started.elapsed().as_secs_f64(),
+    });
+    let name = match (&args.out, args.smoke) {
+        (Some(_), _) => String::new(),
+        (None, true) => format!("gpu-smoke-{}-{}.json", kind.name(), today()),
+        (None, false) => format!("gpu-{}-{}.json", slug(gpu_label.as_deref()), today()),
+    };
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("bench/results").join(name));
+    let dir = out.parent().unwrap_or(Path::new("."));
+    let file = out
+        .file_name()
+        .context("--out names no file")?
+        .to_string_lossy()
+        .into_owned();
+    write_report(dir, &file, &doc)?;
+    Ok(())
+}
+
+/// The venv `tools/bench/gpu_setup.sh` makes.
+const VENV_PYTHON: &str = ".venv-gpu/bin/python";
+
+/// Installs what the GPU run needs, then runs this benchmark again in release with
+/// `--no-setup` and the same arguments.
+fn setup_then_rerun(args: &Args) -> anyhow::Result<()> {
+    let python_given = args.python.is_some();
+    if !python_given {
+        let status = Command::new("bash")
+            .arg("tools/bench/gpu_setup.sh")
+            .status()
+            .context("tools/bench/gpu_setup.sh: cannot start bash")?;
+        if !status.success() {
+            bail!("tools/bench/gpu_setup.sh failed ({status})");
+        }
+    }
+    let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    cmd.args(["run", "--quiet", "--release", "--package", "xtask", "--"])
+        .args(["bench", "gpu", "--no-setup", "--device", args.device.name()]);
+    if let Some(out) = &args.out {
+        cmd.arg("--out").arg(out);
+    }
+    if let Some(py) = &args.python {
+        cmd.arg("--python").arg(py);
+    }
+    let status = cmd.status().context("cannot start cargo")?;
+    if !status.success() {
+        bail!("the release run of bench gpu failed ({status})");
+    }
+    Ok(())
+}
+
+/// Fastest of `repeats` timed calls after one warm-up call.
+fn time_best(repeats: usize, mut f: impl FnMut() -> anyhow::Result<()>) -> anyhow::Result<f64> {
+    f()?;
+    let mut best = f64::INFINITY;
+    for _ in 0..repeats.max(1) {
+        let s = Instant::now();
+        f()?;
+        best = best.min(s.elapsed().as_secs_f64());
+    }
+    Ok(best)
+}
+
+/// Waits for the device: reads one number that depends on `t`.
+fn sync<const D: usize>(t: Tensor<D>) -> f32 {
+    t.sum().into_scalar::<f32>()
+}
+
+/// U-Net forward seconds, batch 2, random weights.
+fn unet_forward(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<f64> {
+    let device = kind.device();
+    let unet = UNet2DConditionModel::new(&sizes.unet, &device);
+    let ctx = sizes.unet.cross_attention_dim;
+    let x = Tensor::<4>::random(
+        [2, sizes.unet.in_channels, sizes.latent, sizes.latent],
+        Distribution::Normal(0.0, 1.0),
+        &device,
+    );
+    let ehs = Tensor::<3>::random([2, 77, ctx], Distribution::Normal(0.0, 1.0), &device);
+    let t = vec![500.0f32; 2];
+    time_best(sizes.repeats, || {
+        sync(unet.forward(x.clone(), &t, ehs.clone()));
+        Ok(())
+    })
+}
+
+/// VAE encoder forward and backward seconds (frozen weights, gradient to the image).
+fn vae_encoder_fwd_bwd(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<f64> {
+    let ad = kind.autodiff_device();
+    let vae = AutoencoderKL::new(&sizes.vae, &ad).no_grad();
+    let side = sizes.vae_side;
+    time_best(sizes.repeats, || {
+        let img = Tensor::<4>::random([1, 3, side, side], Distribution::Uniform(-1.0, 1.0), &ad)
+            .require_grad();
+        let grads = vae.encode_mean(img.clone()).sum().backward();
+        let g = img.grad(&grads).context("no image gradient")?;
+        sync(g);
+        Ok(())
+    })
+}
+
+/// `bench pipeline` at the sizes' prior and preset, into a temporary folder; its report.
+fn pipeline_step(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<Value> {
+    let tmp = tempfile::tempdir()?;
+    let args = super::bench_pipeline::Args {
+        prior: sizes.pipeline_prior.into(),
+        preset: sizes.pipeline_preset.into(),
+        method: "gb-nerf".into(),
+        steps: sizes.repeats,
+        warmup: 1,
+        device: Some(kind),
+        floor_tflop: 4.0,
+        peak_tflops: Vec::new(),
+        out: tmp.path().to_path_buf(),
+    };
+    super::bench_pipeline::run(args)?;
+    let file = std::fs::read_dir(tmp.path())?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|e| e == "json"))
+        .context("bench pipeline wrote no report")?;
+    let text = std::fs::read_to_string(&file)?;
+    let mut doc: Value = serde_json::from_str(&text)?;
+    if let Some(o) = doc.as_object_mut() {
+        o.remove("machine");
+    }
+    Ok(doc)
+}
+
+/// NeRF training steps/s per preset on `kind` and on flex (stairs, in the occupancy
+/// warm-up: every sample evaluated), with the ratio.
+fn nerf_speed(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<Value> {
+    let tmp = tempfile::tempdir()?;
+    let dir = tmp.path().join("stairs");
+    let options = ProceduralOptions {
+        name: SceneName::Stairs,
+        ..Default::default()
+    };
+    procedural::write(&options, &dir).context("generating stairs")?;
+    let (_, scene) = gb_nerf::scene::load(&dir, &LoadOptions::default())?;
+    let mut rows = Vec::new();
+    for preset in sizes.nerf_presets {
+        let cfg = NerfConfig::preset(preset)?;
+        let speed = |device: BackendKind| -> anyhow::Result<f64> {
+            let mut t = Trainer::new(&scene, cfg.clone(), device)?;
+            for _ in 0..2 {
+                t.train_step()?;
+            }
+            let s = Instant::now();
+            for _ in 0..sizes.nerf_steps {
+                t.train_step()?;
+            }
+            Ok(sizes.nerf_steps as f64 / s.elapsed().as_secs_f64())
+        };
+        let on_device = speed(kind)?;
+        let on_flex = speed(BackendKind::Flex)?;
+        rows.push(json!({
+            "preset": preset,
+            "steps_per_s": { kind.name(): on_device, "flex": on_flex },
+            "device_over_flex": on_device / on_flex,
+        }));
+    }
+    Ok(json!({ "scene": "stairs (procedural)", "timed_steps": sizes.nerf_steps, "presets": rows }))
+}
+
+/// `tools/bench/unet_bench.py` on the GPU (`--device cuda --fp16`): U-Net fp32 and fp16 and
+/// the VAE encoder; on failure the object says why.
+fn diffusers_reference(python: &Path, sizes: &Sizes) -> Value {
+    let out = Command::new(python)
+        .arg("tools/bench/unet_bench.py")
+        .args(["--latent", &sizes.latent.to_string(), "--batch", "2"])
+        .args([
+            "--repeats",
+            &sizes.repeats.to_string(),
+            "--device",
+            "cuda",
+            "--fp16",
+        ])
+        .args(["--vae-sizes", &sizes.vae_side.to_string()])
+        .output();
+    match out {
+        Ok(out) if out.status.success() => {
+            let text = String::from_utf8_lossy(&out.stdout);
+            serde_json::from_str(text.lines().last().unwrap_or(""))
+                .unwrap_or_else(|e| json!({ "error": format!("unparsable output: {e}") }))
+        }
+        Ok(out) => json!({ "error": String::from_utf8_lossy(&out.stderr)
+            .lines().last().unwrap_or("failed").to_string() }),
+        Err(e) => json!({ "error": format!("{}: {e}", python.display()) }),
+    }
+}
+
+/// A file-name form of the GPU's name (`NVIDIA H200, 570.1` -> `nvidia-h200`).
+fn slug(gpu: Option<&str>) -> String {
+    let name = gpu.and_then(|g| g.split(',').next()).unwrap_or("unknown");
+    let s: String = name
+        .trim()
+        .to_ascii_lowercase()
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
+        .collect();
+    s.split('-')
+        .filter(|p| !p.is_empty())
+        .collect::<Vec<_>>()
+        .join("-")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::slug;
+
+    #[test]
+    fn gpu_names_become_file_names() {
+        assert_eq!(slug(Some("NVIDIA H200, 570.86.15")), "nvidia-h200");
+        assert_eq!(slug(Some("NVIDIA H100 80GB HBM3")), "nvidia-h100-80gb-hbm3");
+        assert_eq!(slug(None), "unknown");
+    }
+}
