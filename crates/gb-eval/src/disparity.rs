@@ -122,7 +122,9 @@ fn read_npy(bytes: &[u8]) -> Result<ScalarMap, String> {
             ))
         }
     };
-    let data = if fortran {
+    // A map with one row or one column reads the same in both orders, and an empty one has
+    // nothing to reorder (its other side may be huge: no loop over it).
+    let data = if fortran && width > 1 && height > 1 {
         let mut c = vec![0.0; width * height];
         for y in 0..height {
             for x in 0..width {
@@ -233,5 +235,46 @@ mod tests {
             ..a.clone()
         };
         assert_eq!(d_psnr(&a, &b, &Region::Full).unwrap(), f64::INFINITY);
+    }
+
+    /// `.npy` bytes (version 1.0) with `header` as the dictionary and `data` after it.
+    fn npy(header: &str, data: &[u8]) -> Vec<u8> {
+        let mut text = header.to_string();
+        while !(10 + text.len() + 1).is_multiple_of(64) {
+            text.push(' ');
+        }
+        text.push('\n');
+        let mut out = b"\x93NUMPY\x01\x00".to_vec();
+        out.extend_from_slice(&(text.len() as u16).to_le_bytes());
+        out.extend_from_slice(text.as_bytes());
+        out.extend_from_slice(data);
+        out
+    }
+
+    /// Found by `cargo xtask fuzz`: a Fortran-order map with a zero side and a huge other
+    /// side used to loop over the huge side (a hang); it now reads as the empty map it is.
+    #[test]
+    fn an_empty_fortran_map_with_a_huge_side_reads_at_once() {
+        let bytes = npy(
+            "{'descr': '<f4', 'fortran_order': True, 'shape': (1000000000000, 0), }",
+            &[],
+        );
+        let m = read_npy(&bytes).unwrap();
+        assert_eq!((m.height, m.width, m.data.len()), (1_000_000_000_000, 0, 0));
+    }
+
+    #[test]
+    fn fortran_maps_are_reordered_to_rows() {
+        let values: Vec<u8> = [1.0f32, 4.0, 2.0, 5.0, 3.0, 6.0]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let bytes = npy(
+            "{'descr': '<f4', 'fortran_order': True, 'shape': (2, 3), }",
+            &values,
+        );
+        let m = read_npy(&bytes).unwrap();
+        assert_eq!((m.height, m.width), (2, 3));
+        assert_eq!(m.data, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
     }
 }

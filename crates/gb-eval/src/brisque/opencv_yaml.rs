@@ -324,6 +324,10 @@ fn flow_value(
                         return Ok(YamlValue::Seq(items));
                     }
                     Some(',') => *pos += 1,
+                    // A stray '}' is no value: without this the loop would never advance.
+                    Some('}') => {
+                        return Err(parse_err(path, line, "unexpected '}' in a '[' sequence"))
+                    }
                     Some(_) => items.push(flow_value(chars, pos, path, line, depth + 1)?),
                     None => return Err(parse_err(path, line, "unclosed '['")),
                 }
@@ -484,5 +488,15 @@ mod tests {
         let err = parse_opencv_yaml("a: [1, 2\nb: 3\n", Path::new("bad.yml")).unwrap_err();
         let msg = err.to_string();
         assert!(msg.contains("bad.yml") && msg.contains("unclosed"), "{msg}");
+    }
+
+    /// Found by `cargo xtask fuzz`: a stray '}' in a flow sequence used to be read as an
+    /// empty item again and again, without end, until memory ran out.
+    #[test]
+    fn a_stray_brace_in_a_sequence_is_an_error() {
+        let err = parse_opencv_yaml("a: [ 1, } ]\n", Path::new("bad.yml")).unwrap_err();
+        let text = err.to_string();
+        assert!(text.contains("bad.yml") && text.contains("'}'"), "{text}");
+        assert!(parse_opencv_yaml("a: [1, {b: 2}]\n", Path::new("ok.yml")).is_ok());
     }
 }
