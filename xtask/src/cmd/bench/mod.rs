@@ -1,9 +1,20 @@
 //! `cargo xtask bench <what>`: benchmarks, each writing `bench/results/<what>-*.json` with the
 //! machine named and a reference measured in the same run.
 //!
-//! Adding a benchmark (nerf, unet, ...): write `xtask/src/cmd/bench_<what>.rs` with
-//! `pub struct Args` (clap::Args) and `pub fn run(args: Args) -> anyhow::Result<()>`, register
-//! the module in `cmd/mod.rs`, then add one variant to [`What`] and one arm to [`run`].
+//! One file per benchmark in this folder, with the helpers they share here (the machine's
+//! description, peak memory, the report writer, the date) and in [`python`] (the reference
+//! interpreter). Adding a benchmark (nerf, unet, ...): write `bench/<what>.rs` with
+//! `pub struct Args` (clap::Args) and `pub fn run(args: Args) -> anyhow::Result<()>`, declare
+//! it below, then add one variant to [`What`] and one arm to [`run`].
+
+pub mod distill;
+pub mod eval;
+pub mod gpu;
+pub mod nerf;
+pub mod pipeline;
+pub mod python;
+pub mod quality;
+pub mod unet;
 
 /// Arguments of `cargo xtask bench`.
 #[derive(clap::Args)]
@@ -16,32 +27,32 @@ pub struct Args {
 #[derive(clap::Subcommand)]
 enum What {
     /// Time per image of each evaluation metric, against the Python references.
-    Eval(super::bench_eval::Args),
+    Eval(eval::Args),
     /// NeRF training speed per preset and backend, against plain PyTorch on this CPU.
-    Nerf(super::bench_nerf::Args),
+    Nerf(nerf::Args),
     /// U-Net / VAE forward time at SD-1.5 size, against diffusers on this CPU.
-    Unet(super::bench_unet::Args),
+    Unet(unet::Args),
     /// One guidance step of SDS, CSD and BSD, and BSD's saving over CSD.
-    Distill(super::distill_bench::Args),
+    Distill(distill::Args),
     /// Object-removal quality of every method on the procedural scenes, against `none`.
-    Quality(super::bench_quality::Args),
+    Quality(quality::Args),
     /// One GB-NeRF training step per phase at a preset, with an SD-1.5-sized prior.
-    Pipeline(super::bench_pipeline::Args),
+    Pipeline(pipeline::Args),
     /// Every GPU figure in one file (U-Net, VAE, a full step, NeRF vs flex); `--smoke` at
     /// tiny sizes on any device.
-    Gpu(super::bench_gpu::Args),
+    Gpu(gpu::Args),
 }
 
 /// Runs the chosen benchmark.
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.what {
-        What::Eval(a) => super::bench_eval::run(a),
-        What::Nerf(a) => super::bench_nerf::run(a),
-        What::Unet(a) => super::bench_unet::run(a),
-        What::Distill(a) => super::distill_bench::run(a),
-        What::Quality(a) => super::bench_quality::run(a),
-        What::Pipeline(a) => super::bench_pipeline::run(a),
-        What::Gpu(a) => super::bench_gpu::run(a),
+        What::Eval(a) => eval::run(a),
+        What::Nerf(a) => nerf::run(a),
+        What::Unet(a) => unet::run(a),
+        What::Distill(a) => distill::run(a),
+        What::Quality(a) => quality::run(a),
+        What::Pipeline(a) => pipeline::run(a),
+        What::Gpu(a) => gpu::run(a),
     }
 }
 

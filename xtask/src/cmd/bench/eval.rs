@@ -45,7 +45,7 @@ pub struct Args {
     #[arg(long, default_value_t = 3)]
     repeats: usize,
     /// Backend for ST-LPIPS.
-    #[arg(long, value_parser = super::parse::device())]
+    #[arg(long, value_parser = crate::cmd::parse::device())]
     device: Option<BackendKind>,
     /// The shared data folder (default: $GB_TEST_DATA).
     #[arg(long)]
@@ -72,7 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(d) => d,
         None => bail!("no shared data folder: pass --data DIR or set GB_TEST_DATA"),
     };
-    let python = super::bench_python::reference_python(args.python.as_deref(), &REFERENCE_MODULES)?;
+    let python = super::python::reference_python(args.python.as_deref(), &REFERENCE_MODULES)?;
     let device = args.device.unwrap_or_default();
     let tmp = std::env::temp_dir().join(format!("gb-bench-eval-{}", std::process::id()));
     let result = write_pairs(&data, &tmp, args.images).and_then(|(pred_dir, gt_dir)| {
@@ -89,7 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let agreement = agreement(&rust, &python);
     let doc = json!({
         "benchmark": "eval",
-        "machine": super::bench::machine_description(),
+        "machine": super::machine_description(),
         "images": args.images,
         "image_size": [504, 378],
         "repeats": args.repeats,
@@ -97,7 +97,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "python": python,
         "largest_value_difference": agreement,
     });
-    super::bench::write_report(&args.out, &format!("eval-{device}.json"), &doc)?;
+    super::write_report(&args.out, &format!("eval-{device}.json"), &doc)?;
     Ok(())
 }
 

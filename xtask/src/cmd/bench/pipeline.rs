@@ -54,7 +54,7 @@ pub struct Args {
     #[arg(long, default_value_t = 2)]
     pub warmup: usize,
     /// Backend.
-    #[arg(long, value_parser = super::parse::device())]
+    #[arg(long, value_parser = crate::cmd::parse::device())]
     pub device: Option<BackendKind>,
     /// Arithmetic of one guidance step at the prior's resolution, TFLOP.
     #[arg(long, default_value_t = 4.0)]
@@ -229,14 +229,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let build = Instant::now();
     let prior = match args.prior.as_str() {
         "sd15" => GuidancePrior::random(
-            &super::bench_unet::sd15_inpainting_unet()?,
-            &super::bench_unet::sd15_vae()?,
+            &super::unet::sd15_inpainting_unet()?,
+            &super::unet::sd15_vae()?,
             &sd15_text_encoder(),
             &gb_core::assets_dir().join("clip-tokenizer"),
             &device,
         )?,
         spec => {
-            let dir = super::finetune::resolve_prior(spec)?;
+            let dir = crate::cmd::finetune::resolve_prior(spec)?;
             GuidancePrior::load(&dir, None, &device)?
         }
     };
@@ -349,7 +349,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (gpu_start, gpu_peak) = gpu.as_ref().map(|g| g.read()).unwrap_or((None, 0));
     let doc = json!({
         "benchmark": "pipeline step",
-        "machine": super::bench::machine_description(),
+        "machine": super::machine_description(),
         "gpu": gpu_name(),
         "device": kind.name(),
         "profile": if cfg!(debug_assertions) { "dev (deps at opt-level 3)" } else { "release" },
@@ -367,7 +367,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "projected_run_h": step_s * total_steps as f64 / 3600.0,
         "floor": { "tflop_per_guidance_step": args.floor_tflop, "at_peak": floors },
         "steps_failed": failure,
-        "peak_rss_mb": super::bench::peak_rss_mb(),
+        "peak_rss_mb": super::peak_rss_mb(),
         "gpu_memory_mib": gpu.as_ref().map(|_| json!({ "at_start": gpu_start, "peak": gpu_peak })),
     });
     let preset_name = std::path::Path::new(&args.preset)
@@ -380,7 +380,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "folder".to_string()
     };
     let name = format!("pipeline-{prior_name}-{preset_name}-{}.json", kind.name());
-    super::bench::write_report(&args.out, &name, &doc)?;
+    super::write_report(&args.out, &name, &doc)?;
     Ok(())
 }
 

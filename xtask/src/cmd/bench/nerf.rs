@@ -46,7 +46,7 @@ pub struct Args {
     #[arg(long, default_value = "cpu")]
     pub torch_device: String,
     /// Backend that trains the accuracy points.
-    #[arg(long, default_value = "flex", value_parser = super::parse::device())]
+    #[arg(long, default_value = "flex", value_parser = crate::cmd::parse::device())]
     pub accuracy_device: BackendKind,
     /// Also train every preset to completion on flex and record PSNR against wall time.
     #[arg(long)]
@@ -192,7 +192,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The speed rows time the PyTorch reference too: check its packages before any timing.
     let python = match args.steps {
         0 => None,
-        _ => Some(super::bench_python::reference_python(
+        _ => Some(super::python::reference_python(
             args.python.as_deref(),
             &["torch", "numpy"],
         )?),
@@ -254,7 +254,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .as_secs();
     let path = args.out.join(format!("nerf-{stamp}.json"));
     let mut report = json!({
-        "benchmark": "nerf", "machine": super::bench::machine_description(),
+        "benchmark": "nerf", "machine": super::machine_description(),
         "scene": "stairs 200x150 (procedural)", "timed_steps": args.steps,
         "speed": rows, "accuracy": [],
     });

@@ -34,7 +34,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     repeats: usize,
     /// Backend: ndarray, flex (default) or wgpu.
-    #[arg(long, value_parser = super::parse::device())]
+    #[arg(long, value_parser = crate::cmd::parse::device())]
     device: Option<BackendKind>,
     /// Python with torch and diffusers (default: $GB_PYTHON, else python3 on PATH;
     /// `bash tools/bench/make_venv.sh` makes the pinned one); `none` skips the reference.
@@ -96,7 +96,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The diffusers reference runs after the Rust timing: check its packages first.
     let reference = match args.python.as_deref() {
         Some(p) if p.as_os_str() == "none" => None,
-        explicit => Some(super::bench_python::reference_python(
+        explicit => Some(super::python::reference_python(
             explicit,
             &["torch", "diffusers"],
         )?),
@@ -122,7 +122,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let out = unet.forward(x.clone(), &t, ehs.clone());
         let _ = out.into_data();
     });
-    let unet_rss = super::bench::peak_rss_mb();
+    let unet_rss = super::peak_rss_mb();
     drop(unet);
 
     let ad = device.clone().autodiff();
@@ -146,7 +146,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "unet_forward_s": unet_s,
         "unet_peak_rss_mb": unet_rss,
         "vae_encoder_fwd_bwd_s": vae_times,
-        "peak_rss_mb": super::bench::peak_rss_mb(),
+        "peak_rss_mb": super::peak_rss_mb(),
     });
     let python = run_python(&args, reference.as_deref());
     let ratio = |k: &str| -> Value {
@@ -171,7 +171,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let doc = json!({
         "benchmark": "unet",
-        "machine": super::bench::machine_description(),
+        "machine": super::machine_description(),
         "unet": "SD-1.5-inpainting shape (859.5M parameters, random weights)",
         "latent": args.latent,
         "batch": args.batch,
@@ -179,7 +179,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "python": python,
         "ratio_rust_over_python": { "unet_forward": ratio("unet_forward_s"), "vae_encoder_fwd_bwd": vae_ratio },
     });
-    super::bench::write_report(&args.out, &format!("unet-{kind}.json"), &doc)?;
+    super::write_report(&args.out, &format!("unet-{kind}.json"), &doc)?;
     Ok(())
 }
 

@@ -38,8 +38,8 @@ use gb_nerf::scene::LoadOptions;
 use gb_nerf::train::{NerfConfig, Trainer};
 use serde_json::{json, Value};
 
-use super::bench::{machine_description, today, write_report};
-use super::bench_pipeline::GpuMemoryPoll;
+use super::pipeline::GpuMemoryPoll;
+use super::{machine_description, today, write_report};
 
 /// Arguments of `cargo xtask bench gpu`.
 #[derive(clap::Args, Debug)]
@@ -51,7 +51,7 @@ pub struct Args {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// The device measured.
-    #[arg(long, default_value = "wgpu", value_parser = super::parse::device())]
+    #[arg(long, default_value = "wgpu", value_parser = crate::cmd::parse::device())]
     pub device: BackendKind,
     /// Python with torch and diffusers for the reference (default: the venv that the setup
     /// makes, else $GB_PYTHON, else python3); `none` skips it. Never used with `--smoke`.
@@ -92,8 +92,8 @@ impl Sizes {
             })
         } else {
             Ok(Self {
-                unet: super::bench_unet::sd15_inpainting_unet()?,
-                vae: super::bench_unet::sd15_vae()?,
+                unet: super::unet::sd15_inpainting_unet()?,
+                vae: super::unet::sd15_vae()?,
                 latent: 64,
                 vae_side: 512,
                 pipeline_prior: "sd15",
@@ -118,7 +118,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let reference = match (&args.python, args.smoke) {
         (_, true) => None,
         (Some(p), _) if p.as_os_str() == "none" => None,
-        (explicit, false) => Some(super::bench_python::reference_python(
+        (explicit, false) => Some(super::python::reference_python(
             explicit
                 .as_deref()
                 .or(Some(Path::new(VENV_PYTHON)).filter(|p| p.exists())),
@@ -151,7 +151,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let nerf = nerf_speed(&sizes, kind)?;
 
     let (gpu_start, gpu_peak) = gpu.as_ref().map(|g| g.read()).unwrap_or((None, 0));
-    let gpu_label = super::bench_pipeline::gpu_name();
+    let gpu_label = super::pipeline::gpu_name();
     let step_s = pipeline["step_s_median"].as_f64();
     let doc = json!({
         "benchmark": "gpu",
@@ -184,7 +184,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "nerf": nerf,
         "diffusers": python,
         "gpu_memory_mib": gpu.as_ref().map(|_| json!({ "at_start": gpu_start, "peak": gpu_peak })),
-        "peak_rss_mb": super::bench::peak_rss_mb(),
+        "peak_rss_mb": super::peak_rss_mb(),
         "wall_s": started.elapsed().as_secs_f64(),
     });
     let name = match (&args.out, args.smoke) {
@@ -291,7 +291,7 @@ fn vae_encoder_fwd_bwd(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<f64> 
 /// `bench pipeline` at the sizes' prior and preset, into a temporary folder; its report.
 fn pipeline_step(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<Value> {
     let tmp = tempfile::tempdir()?;
-    let args = super::bench_pipeline::Args {
+    let args = super::pipeline::Args {
         prior: sizes.pipeline_prior.into(),
         preset: sizes.pipeline_preset.into(),
         method: "gb-nerf".into(),
@@ -302,7 +302,7 @@ fn pipeline_step(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<Value> {
         peak_tflops: Vec::new(),
         out: tmp.path().to_path_buf(),
     };
-    super::bench_pipeline::run(args)?;
+    super::pipeline::run(args)?;
     let file = std::fs::read_dir(tmp.path())?
         .filter_map(Result::ok)
         .map(|e| e.path())

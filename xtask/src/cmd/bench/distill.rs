@@ -27,7 +27,7 @@ pub struct Args {
     #[arg(long)]
     pub resolution: Option<usize>,
     /// Compute backend.
-    #[arg(long, value_parser = super::parse::device())]
+    #[arg(long, value_parser = crate::cmd::parse::device())]
     pub device: Option<BackendKind>,
     /// Output JSON (default bench/results/distill-<device>.json).
     #[arg(long)]
@@ -130,7 +130,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .and_then(|r| r.3.first().copied())
             .unwrap_or(f64::NAN)
     };
-    let machine = super::bench::machine_description();
+    let machine = super::machine_description();
     let json = serde_json::json!({
         "benchmark": "distill step (VAE encoder fwd+bwd + one batched U-Net call)",
         "prior": args.prior.display().to_string(),

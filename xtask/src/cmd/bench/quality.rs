@@ -30,7 +30,7 @@ pub struct Args {
     /// The grid: methods (default: the whole grid, without the w3 sweep), preset, prior,
     /// steps, device.
     #[command(flatten)]
-    pub grid: super::ablate::GridArgs,
+    pub grid: crate::cmd::ablate::GridArgs,
     /// Comma-separated training seeds; the tables are their mean (default: the preset's seed).
     #[arg(long, value_delimiter = ',')]
     pub seeds: Option<Vec<u64>>,
@@ -177,7 +177,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 Some(s) => args.work.join(name.to_string()).join(format!("seed-{s}")),
                 None => args.work.join(name.to_string()),
             };
-            let outcome = super::ablate::run(super::ablate::Args {
+            let outcome = crate::cmd::ablate::run(crate::cmd::ablate::Args {
                 scene: scene_dir.clone(),
                 grid: args.grid.clone(),
                 lora: None,
@@ -209,7 +209,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let ablation = mean_table(&tables("ablation"));
         let report = json!({
             "benchmark": "quality",
-            "machine": super::bench::machine_description(),
+            "machine": super::machine_description(),
             "scene": format!("{name} (procedural, seed 0, {}x{})", opts.width, opts.height),
             "preset": args.grid.preset,
             "prior": args.grid.prior.clone().unwrap_or_else(|| "tiny".into()),
