@@ -67,7 +67,8 @@ fn gpu_bench_smoke_writes_every_section() {
     let rows = doc["nerf"]["presets"].as_array().unwrap();
     assert_eq!(rows.len(), 1);
     assert_eq!(rows[0]["preset"], "fast");
-    let on_device = positive(&rows[0]["steps_per_s"][device], "nerf device");
+    assert_eq!(rows[0]["device"], device);
+    let on_device = positive(&rows[0]["steps_per_s"]["device"], "nerf device");
     let on_flex = positive(&rows[0]["steps_per_s"]["flex"], "nerf flex");
     let ratio = positive(&rows[0]["device_over_flex"], "ratio");
     assert!((ratio - on_device / on_flex).abs() <= 1e-9 * ratio);

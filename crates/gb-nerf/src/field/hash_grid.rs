@@ -15,7 +15,8 @@
 //! Unlike instant-ngp every level owns a full table of `T` rows (simpler addressing, same
 //! values). The lookups (indices and weights) are computed where [`LookupSite`] says
 //! (`auto`, the default, picks `device` on a GPU card and `host` elsewhere):
-//! - `host`: a loop on the CPU ([`hash_lookups`], [`HashGrid::encode`]), then
+//! - `host`: a loop over the points, spread over the CPU cores ([`hash_lookups`],
+//!   [`HashGrid::encode`]), then
 //!   an upload of `levels * 8` rows and weights per point (1.5 KB with 16 levels);
 //! - `device`: tensor operations on the compute device from the uploaded points, 12 bytes
 //!   per point ([`HashGrid::encode_points`]), bit-identical to the host loop.
@@ -31,6 +32,7 @@
 
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Distribution, Int, Tensor, TensorData};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Hyper-parameters of the hash encoding.
@@ -132,49 +134,67 @@ pub fn spatial_hash(g: [u32; 3]) -> u32 {
     g[0] ^ g[1].wrapping_mul(2_654_435_761) ^ g[2].wrapping_mul(805_459_861)
 }
 
-/// Computes the table rows and weights of `points` (coordinates in `[0, 1]`, clamped).
+/// Points per parallel task of [`hash_lookups`].
+const LOOKUP_CHUNK: usize = 1024;
+
+/// Computes the table rows and weights of `points` (coordinates in `[0, 1]`, clamped),
+/// spread over the cores (rayon) in chunks of points; the result does not depend on the
+/// number of threads.
 pub fn hash_lookups(config: &HashGridConfig, points: &[[f32; 3]]) -> HashLookups {
     let levels = config.levels;
     let t = config.table_size() as u64;
     let b = config.growth();
-    let mut rows = Vec::with_capacity(points.len() * levels * 8);
-    let mut weights = Vec::with_capacity(points.len() * levels * 8);
-    for p in points {
-        for l in 0..levels {
+    // per level: (scale, resolution, dense indexing)
+    let level_params: Vec<(f32, u64, bool)> = (0..levels)
+        .map(|l| {
             let scale = config.base_resolution * b.powi(l as i32) - 1.0;
             let res = scale.ceil() as u64 + 1;
-            let dense = res.saturating_mul(res).saturating_mul(res) <= t;
-            let mut g = [0u32; 3];
-            let mut f = [0f32; 3];
-            for i in 0..3 {
-                let x = if p[i].is_finite() {
-                    p[i].clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let pos = x * scale + 0.5;
-                let fl = pos.floor();
-                g[i] = fl as u32;
-                f[i] = pos - fl;
-            }
-            for c in 0..8u32 {
-                let mut w = 1.0f32;
-                let mut gc = [0u32; 3];
-                for i in 0..3 {
-                    let bit = (c >> i) & 1;
-                    gc[i] = g[i] + bit;
-                    w *= if bit == 1 { f[i] } else { 1.0 - f[i] };
+            (scale, res, res.saturating_mul(res).saturating_mul(res) <= t)
+        })
+        .collect();
+    let per_point = levels * 8;
+    let mut rows = vec![0i64; points.len() * per_point];
+    let mut weights = vec![0f32; points.len() * per_point];
+    let chunk = LOOKUP_CHUNK * per_point.max(1);
+    rows.par_chunks_mut(chunk)
+        .zip(weights.par_chunks_mut(chunk))
+        .zip(points.par_chunks(LOOKUP_CHUNK))
+        .for_each(|((rows, weights), points)| {
+            for (k, p) in points.iter().enumerate() {
+                for (l, &(scale, res, dense)) in level_params.iter().enumerate() {
+                    let mut g = [0u32; 3];
+                    let mut f = [0f32; 3];
+                    for i in 0..3 {
+                        let x = if p[i].is_finite() {
+                            p[i].clamp(0.0, 1.0)
+                        } else {
+                            0.0
+                        };
+                        let pos = x * scale + 0.5;
+                        let fl = pos.floor();
+                        g[i] = fl as u32;
+                        f[i] = pos - fl;
+                    }
+                    for c in 0..8u32 {
+                        let mut w = 1.0f32;
+                        let mut gc = [0u32; 3];
+                        for i in 0..3 {
+                            let bit = (c >> i) & 1;
+                            gc[i] = g[i] + bit;
+                            w *= if bit == 1 { f[i] } else { 1.0 - f[i] };
+                        }
+                        let index = if dense {
+                            (gc[0] as u64 + gc[1] as u64 * res + gc[2] as u64 * res * res) % t
+                        } else {
+                            spatial_hash(gc) as u64 % t
+                        };
+                        let j = k * per_point + l * 8 + c as usize;
+                        rows[j] = (l as u64 * t + index) as i64;
+                        weights[j] = w;
+                    }
                 }
-                let index = if dense {
-                    (gc[0] as u64 + gc[1] as u64 * res + gc[2] as u64 * res * res) % t
-                } else {
-                    spatial_hash(gc) as u64 % t
-                };
-                rows.push((l as u64 * t + index) as i64);
-                weights.push(w);
             }
-        }
-    }
+        });
     HashLookups {
         points: points.len(),
         rows,
@@ -392,6 +412,30 @@ mod tests {
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0f32, f32::max);
             assert!(worst <= 1e-9, "{kind}: max difference {worst}");
+        }
+    }
+
+    /// Lookups of a set larger than one parallel chunk equal the lookups of each point alone.
+    #[test]
+    fn parallel_lookups_equal_point_by_point_lookups() {
+        let c = cfg();
+        let pts: Vec<[f32; 3]> = (0..2 * LOOKUP_CHUNK + 77)
+            .map(|i| {
+                let f = i as f32 / 2000.0;
+                [f.fract(), (f * 3.7).fract(), (f * 9.1).fract()]
+            })
+            .collect();
+        let all = hash_lookups(&c, &pts);
+        assert_eq!(all.points, pts.len());
+        let per = c.levels * 8;
+        for (k, p) in pts.iter().enumerate() {
+            let one = hash_lookups(&c, std::slice::from_ref(p));
+            assert_eq!(all.rows[k * per..(k + 1) * per], one.rows[..], "point {k}");
+            assert_eq!(
+                all.weights[k * per..(k + 1) * per],
+                one.weights[..],
+                "point {k}"
+            );
         }
     }
 

@@ -1,6 +1,7 @@
 //! Stratified sampling along rays, with optional empty-space skipping.
 
 use rand::Rng;
+use rayon::prelude::*;
 
 use super::{OccupancyGrid, RayBatch, SampleSet, SceneSpace, Spacing};
 
@@ -47,15 +48,45 @@ pub fn normalized_positions(rays: &RayBatch, samples: &SampleSet, spacing: Spaci
 /// evaluated (zero density). With an occupancy grid the march also stops early: the
 /// transmittance is estimated from the grid's running densities, and samples after it falls
 /// below [`MIN_TRANSMITTANCE`] are not evaluated (they would carry weights below it).
+/// Rays are marched in parallel (rayon); the jitter is drawn first, in ray order, so the
+/// result and the random stream are those of a sequential march.
 pub fn sample_rays<R: Rng>(
     rays: &RayBatch,
     space: &SceneSpace,
     samples: usize,
     occupancy: Option<&OccupancyGrid>,
-    mut rng: Option<&mut R>,
+    rng: Option<&mut R>,
 ) -> SampleSet {
     let s = samples.max(1);
     let n = rays.len();
+    let hits = |r: usize| {
+        let (t0, t1) = (rays.near[r], rays.far[r]);
+        t0 < t1 && t0.is_finite() && t1.is_finite()
+    };
+    // The jitter is drawn first, in the order of the sequential march (ray by ray, only for
+    // rays that hit the volume), so the random stream and the samples do not depend on how
+    // the rays are then spread over the cores.
+    let jitter: Option<Vec<f32>> = rng.map(|rng| {
+        let mut v = vec![0.5f32; n * s];
+        for r in (0..n).filter(|&r| hits(r)) {
+            for j in &mut v[r * s..(r + 1) * s] {
+                *j = rng.random::<f32>();
+            }
+        }
+        v
+    });
+    let parts: Vec<SampleSet> = (0..n)
+        .into_par_iter()
+        .chunks(RAYS_PER_TASK)
+        .map(|chunk| {
+            let mut part = SampleSet::default();
+            for r in chunk {
+                let u = jitter.as_ref().map(|j| &j[r * s..(r + 1) * s]);
+                march(rays, r, space, s, occupancy, u, &mut part);
+            }
+            part
+        })
+        .collect();
     let mut out = SampleSet {
         rays: n,
         samples: s,
@@ -63,65 +94,86 @@ pub fn sample_rays<R: Rng>(
         delta: Vec::with_capacity(n * s),
         ..Default::default()
     };
+    for part in parts {
+        out.t.extend(part.t);
+        out.delta.extend(part.delta);
+        out.slots.extend(part.slots);
+        out.points.extend(part.points);
+        out.world.extend(part.world);
+        out.view_dirs.extend(part.view_dirs);
+    }
+    out
+}
+
+/// Rays per parallel task of [`sample_rays`].
+const RAYS_PER_TASK: usize = 64;
+
+/// The samples of ray `r` (see [`sample_rays`]), appended to `out`; `jitter` holds the ray's
+/// `s` uniform draws (bin centres without it). `out.slots` are dense indices of the whole
+/// batch.
+fn march(
+    rays: &RayBatch,
+    r: usize,
+    space: &SceneSpace,
+    s: usize,
+    occupancy: Option<&OccupancyGrid>,
+    jitter: Option<&[f32]>,
+    out: &mut SampleSet,
+) {
     let spacing = space.spacing();
-    for r in 0..n {
-        let (o, d) = (rays.origins[r], rays.dirs[r]);
-        let dlen = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        let unit = if dlen > 0.0 {
-            d.map(|v| v / dlen)
-        } else {
-            [0.0, 0.0, -1.0]
-        };
-        let (t0, t1) = (rays.near[r], rays.far[r]);
-        let hit = t0 < t1 && t0.is_finite() && t1.is_finite();
-        // bin edges through a monotone map u in [0, 1] -> t
-        let edge = |u: f32| -> f32 {
-            match spacing {
-                Spacing::Linear => t0 + (t1 - t0) * u,
-                Spacing::InverseDepth => {
-                    let (a, b) = (1.0 / t0.max(1e-12), 1.0 / t1.max(1e-12));
-                    1.0 / (a + (b - a) * u)
-                }
+    let (o, d) = (rays.origins[r], rays.dirs[r]);
+    let dlen = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let unit = if dlen > 0.0 {
+        d.map(|v| v / dlen)
+    } else {
+        [0.0, 0.0, -1.0]
+    };
+    let (t0, t1) = (rays.near[r], rays.far[r]);
+    let hit = t0 < t1 && t0.is_finite() && t1.is_finite();
+    // bin edges through a monotone map u in [0, 1] -> t
+    let edge = |u: f32| -> f32 {
+        match spacing {
+            Spacing::Linear => t0 + (t1 - t0) * u,
+            Spacing::InverseDepth => {
+                let (a, b) = (1.0 / t0.max(1e-12), 1.0 / t1.max(1e-12));
+                1.0 / (a + (b - a) * u)
             }
-        };
-        let mut log_t = 0.0f32;
-        for i in 0..s {
-            if !hit {
-                out.t.push(t1.max(t0).max(0.0));
-                out.delta.push(0.0);
-                continue;
-            }
-            let (e0, e1) = (edge(i as f32 / s as f32), edge((i + 1) as f32 / s as f32));
-            let u = match rng.as_deref_mut() {
-                Some(rng) => rng.random::<f32>(),
-                None => 0.5,
-            };
-            let t = e0 + (e1 - e0) * u;
-            out.t.push(t);
-            out.delta.push((e1 - e0).abs() * dlen);
-            let p = [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
-            if let Some(q) = space.to_field(p) {
-                let keep = match occupancy {
-                    None => true,
-                    Some(g) => {
-                        let cell = g.cell(q);
-                        let alive = g.occupied[cell] && log_t > MIN_TRANSMITTANCE.ln();
-                        if alive {
-                            log_t -= g.density[cell].min(1e10) * out.delta[r * s + i];
-                        }
-                        alive
+        }
+    };
+    let mut log_t = 0.0f32;
+    for i in 0..s {
+        if !hit {
+            out.t.push(t1.max(t0).max(0.0));
+            out.delta.push(0.0);
+            continue;
+        }
+        let (e0, e1) = (edge(i as f32 / s as f32), edge((i + 1) as f32 / s as f32));
+        let u = jitter.map_or(0.5, |j| j[i]);
+        let t = e0 + (e1 - e0) * u;
+        let delta = (e1 - e0).abs() * dlen;
+        out.t.push(t);
+        out.delta.push(delta);
+        let p = [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
+        if let Some(q) = space.to_field(p) {
+            let keep = match occupancy {
+                None => true,
+                Some(g) => {
+                    let cell = g.cell(q);
+                    let alive = g.occupied[cell] && log_t > MIN_TRANSMITTANCE.ln();
+                    if alive {
+                        log_t -= g.density[cell].min(1e10) * delta;
                     }
-                };
-                if keep {
-                    out.slots.push((r * s + i) as u32);
-                    out.points.push(q);
-                    out.world.push(p);
-                    out.view_dirs.push(unit);
+                    alive
                 }
+            };
+            if keep {
+                out.slots.push((r * s + i) as u32);
+                out.points.push(q);
+                out.world.push(p);
+                out.view_dirs.push(unit);
             }
         }
     }
-    out
 }
 
 #[cfg(test)]
@@ -231,5 +283,56 @@ mod tests {
         }
         let s = sample_rays::<rand_chacha::ChaCha8Rng>(&rays, &space, 16, Some(&grid), None);
         assert_eq!(s.slots.len(), 2, "{:?}", s.slots);
+    }
+
+    /// The parallel march of a batch (several tasks of rays, misses among them, jitter and
+    /// an occupancy grid with running densities) equals marching its rays one at a time from
+    /// the same random stream, which is the sequential definition; the stream ends in the
+    /// same state.
+    #[test]
+    fn a_batch_equals_its_rays_marched_one_by_one() {
+        let space = SceneSpace::Aabb {
+            min: [-1.0; 3],
+            max: [1.0; 3],
+        };
+        let n = 3 * RAYS_PER_TASK + 7;
+        let mut rays = RayBatch::default();
+        for r in 0..n {
+            let a = r as f32 * 0.37;
+            rays.origins.push([0.3 * a.sin(), 0.3 * a.cos(), 2.0]);
+            rays.dirs.push([0.1 * a.cos(), -0.1 * a.sin(), -1.0]);
+            // every fifth ray misses the volume
+            let (near, far) = if r % 5 == 0 { (3.0, 1.0) } else { (1.0, 3.0) };
+            rays.near.push(near);
+            rays.far.push(far);
+        }
+        let mut grid = OccupancyGrid::new(4, 1.0);
+        for c in 0..64 {
+            grid.occupied[c] = c % 3 != 0;
+            grid.density[c] = (c % 7) as f32 * 3.0;
+        }
+        let mut rng_batch = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let batch = sample_rays(&rays, &space, 24, Some(&grid), Some(&mut rng_batch));
+        let mut rng_one = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut t = Vec::new();
+        let mut slots = Vec::new();
+        let mut points = Vec::new();
+        for r in 0..n {
+            let one = RayBatch {
+                origins: vec![rays.origins[r]],
+                dirs: vec![rays.dirs[r]],
+                near: vec![rays.near[r]],
+                far: vec![rays.far[r]],
+            };
+            let s = sample_rays(&one, &space, 24, Some(&grid), Some(&mut rng_one));
+            t.extend(s.t);
+            slots.extend(s.slots.iter().map(|k| k + (r * 24) as u32));
+            points.extend(s.points);
+        }
+        assert_eq!(batch.t, t);
+        assert_eq!(batch.slots, slots);
+        assert_eq!(batch.points, points);
+        assert!(!slots.is_empty() && slots.len() < n * 24, "{}", slots.len());
+        assert_eq!(rng_batch.random::<u64>(), rng_one.random::<u64>());
     }
 }

@@ -345,7 +345,8 @@ fn nerf_speed(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<Value> {
         let on_flex = speed(BackendKind::Flex)?;
         rows.push(json!({
             "preset": preset,
-            "steps_per_s": { kind.name(): on_device, "flex": on_flex },
+            "device": kind.name(),
+            "steps_per_s": { "device": on_device, "flex": on_flex },
             "device_over_flex": on_device / on_flex,
         }));
     }
