@@ -42,6 +42,21 @@ def peak_rss_mb():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def time_forward(unet, x, t, ehs, dev, repeats):
+    """Fastest of `repeats` U-Net forwards after one warm-up (synchronised on CUDA)."""
+    times = []
+    with torch.no_grad():
+        for _ in range(repeats + 1):
+            if dev.type == "cuda":
+                torch.cuda.synchronize()
+            s = time.perf_counter()
+            unet(x, t, encoder_hidden_states=ehs)
+            if dev.type == "cuda":
+                torch.cuda.synchronize()
+            times.append(time.perf_counter() - s)
+    return min(times[1:])
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--latent", type=int, default=32)
@@ -61,32 +76,10 @@ def main():
     x = torch.randn(a.batch, 9, a.latent, a.latent, device=dev)
     ehs = torch.randn(a.batch, 77, 768, device=dev)
     t = torch.tensor([500.0] * a.batch, device=dev)
-    times = []
-    with torch.no_grad():
-        for _ in range(a.repeats + 1):
-            if dev.type == "cuda":
-                torch.cuda.synchronize()
-            s = time.perf_counter()
-            unet(x, t, encoder_hidden_states=ehs)
-            if dev.type == "cuda":
-                torch.cuda.synchronize()
-            times.append(time.perf_counter() - s)
-    out["unet_forward_s"] = min(times[1:])
+    out["unet_forward_s"] = time_forward(unet, x, t, ehs, dev, a.repeats)
     out["unet_params"] = sum(p.numel() for p in unet.parameters())
     if a.fp16:
-        unet16 = unet.half()
-        x16, ehs16, t16 = x.half(), ehs.half(), t.half()
-        times = []
-        with torch.no_grad():
-            for _ in range(a.repeats + 1):
-                if dev.type == "cuda":
-                    torch.cuda.synchronize()
-                s = time.perf_counter()
-                unet16(x16, t16, encoder_hidden_states=ehs16)
-                if dev.type == "cuda":
-                    torch.cuda.synchronize()
-                times.append(time.perf_counter() - s)
-        out["unet_forward_fp16_s"] = min(times[1:])
+        out["unet_forward_fp16_s"] = time_forward(unet.half(), x.half(), t.half(), ehs.half(), dev, a.repeats)
     out["unet_peak_rss_mb"] = peak_rss_mb()
     if dev.type == "cuda":
         out["unet_peak_gpu_mb"] = torch.cuda.max_memory_allocated() / 2**20

@@ -124,30 +124,42 @@ impl Validations {
             .map(|(_, r)| r.clone())
     }
 
-    fn to_checkpoint(&self) -> serde_json::Value {
-        let reports: Vec<serde_json::Value> = self
-            .0
-            .iter()
-            .map(|(s, r)| {
-                let r = serde_json::to_value(r).unwrap_or_default();
-                serde_json::json!({"step": s, "report": exact_floats(r)})
-            })
-            .collect();
-        serde_json::json!({ "validations": reports })
+    fn to_checkpoint(&self) -> Result<serde_json::Value, FinetuneError> {
+        let mut reports = Vec::with_capacity(self.0.len());
+        for (s, r) in &self.0 {
+            let r = serde_json::to_value(r).map_err(|e| FinetuneError::Invalid {
+                path: PathBuf::from("(checkpoint validations)"),
+                message: format!("step {s}: {e}"),
+            })?;
+            reports.push(serde_json::json!({"step": s, "report": exact_floats(r)}));
+        }
+        Ok(serde_json::json!({ "validations": reports }))
     }
 
-    fn from_checkpoint(extra: &serde_json::Value) -> Self {
-        let reports = extra["validations"].as_array().cloned().unwrap_or_default();
-        Self(
-            reports
-                .into_iter()
-                .filter_map(|v| {
-                    let step = v["step"].as_u64()? as usize;
-                    let report = serde_json::from_value(from_exact_floats(v["report"].clone()));
-                    Some((step, report.ok()?))
-                })
-                .collect(),
-        )
+    /// The reports kept in a checkpoint (`ckpt` names it in errors); a checkpoint without
+    /// them has none, an unreadable one is an error rather than a lost report.
+    fn from_checkpoint(extra: &serde_json::Value, ckpt: &Path) -> Result<Self, FinetuneError> {
+        let bad = |message: String| FinetuneError::Invalid {
+            path: ckpt.to_path_buf(),
+            message,
+        };
+        let Some(reports) = extra.get("validations") else {
+            return Ok(Self::default());
+        };
+        let reports = reports
+            .as_array()
+            .ok_or_else(|| bad("`validations` is not a list".into()))?;
+        let mut out = Vec::with_capacity(reports.len());
+        for (i, v) in reports.iter().enumerate() {
+            let step = v["step"]
+                .as_u64()
+                .ok_or_else(|| bad(format!("validations[{i}]: no step")))?
+                as usize;
+            let report = serde_json::from_value(from_exact_floats(v["report"].clone()))
+                .map_err(|e| bad(format!("validations[{i}] (step {step}): {e}")))?;
+            out.push((step, report));
+        }
+        Ok(Self(out))
     }
 }
 
@@ -220,7 +232,7 @@ pub fn run_finetune(
     let mut trainer = if resuming {
         let (mut t, extra) = FinetuneTrainer::resume_with_extra(models, &ckpt, device)?;
         validation_up_to(&opts.out, t.step)?;
-        reports = Validations::from_checkpoint(&extra);
+        reports = Validations::from_checkpoint(&extra, &ckpt)?;
         // `steps` and the checkpoint / validation cadence may change on resume (to extend a
         // run); any other difference would break the exact continuation, so the
         // checkpoint's recipe wins.
@@ -282,7 +294,7 @@ pub fn run_finetune(
             }
         }
         if last || (cfg.checkpoint_every > 0 && s.step % cfg.checkpoint_every == 0) {
-            trainer.save_checkpoint_with(&ckpt, reports.to_checkpoint())?;
+            trainer.save_checkpoint_with(&ckpt, reports.to_checkpoint()?)?;
             write_log(&opts.out, &trainer.losses)?;
         }
     }

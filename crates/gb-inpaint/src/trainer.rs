@@ -438,17 +438,21 @@ impl GuidedTrainer {
             })
             .unwrap_or_default();
         visibility.sort_by_key(|m| m.view);
+        let state_error = |reason: String| {
+            InpaintError::Nerf(gb_nerf::train::NerfError::Checkpoint {
+                path: PathBuf::from("(guided state)"),
+                reason,
+            })
+        };
+        // An empty identity would let any run resume this checkpoint: a failure is an error.
+        let identity_toml = toml::to_string(&self.identity)
+            .map_err(|e| state_error(format!("run identity: {e}")))?;
         let state = GuidedState {
-            identity_toml: toml::to_string(&self.identity).unwrap_or_default(),
+            identity_toml,
             totals: self.totals.clone(),
             visibility,
         };
-        serde_json::to_value(&state).map_err(|e| {
-            InpaintError::Nerf(gb_nerf::train::NerfError::Checkpoint {
-                path: PathBuf::from("(guided state)"),
-                reason: e.to_string(),
-            })
-        })
+        serde_json::to_value(&state).map_err(|e| state_error(e.to_string()))
     }
 
     fn from_base(
