@@ -14,15 +14,16 @@ pub fn workspace_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// The path of the `xtask` binary built beside the running test executable.
+/// The path of the command's binary (`gb-nerf`, what `cargo xtask` runs) built beside the
+/// running test executable.
 pub fn xtask_binary() -> PathBuf {
     let exe = std::env::current_exe().expect("no current executable");
-    // target/<profile>/deps/<test>-<hash> -> target/<profile>/xtask
+    // target/<profile>/deps/<test>-<hash> -> target/<profile>/gb-nerf
     let profile_dir = exe
         .parent()
         .and_then(|deps| deps.parent())
         .expect("test executable is not inside target/<profile>/deps");
-    let bin = profile_dir.join(format!("xtask{}", std::env::consts::EXE_SUFFIX));
+    let bin = profile_dir.join(format!("gb-nerf{}", std::env::consts::EXE_SUFFIX));
     assert!(
         bin.exists(),
         "{} not found: run the tests with `cargo test --workspace`, which builds it",
@@ -36,6 +37,16 @@ pub fn xtask(args: &[&str]) -> Output {
     Command::new(xtask_binary())
         .current_dir(workspace_root())
         .args(args)
+        .output()
+        .expect("cannot start the xtask binary")
+}
+
+/// Runs `cargo xtask ARGS` like [`xtask`], with `env` added to its environment.
+pub fn xtask_with_env(args: &[&str], env: &[(&str, &str)]) -> Output {
+    Command::new(xtask_binary())
+        .current_dir(workspace_root())
+        .args(args)
+        .envs(env.iter().copied())
         .output()
         .expect("cannot start the xtask binary")
 }

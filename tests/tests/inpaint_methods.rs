@@ -48,19 +48,36 @@ fn metrics(out: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap()
 }
 
-/// Runs `method` for 3 steps and checks the outputs; `terms` are the expected guidance terms
-/// of every step: (modality, U-Net batch).
-fn runs(method: &str, extra: &[&str], terms: &[(&str, u64)], prepare: impl Fn(&Path)) {
+/// Runs `method` for 3 steps through the library (`gb_inpaint::run::run`, what `cargo xtask
+/// inpaint` calls) with the fixture prior and LoRA when given, and checks the outputs;
+/// `terms` are the expected guidance terms of every step: (modality, U-Net batch).
+fn runs(
+    method: &str,
+    (prior, lora): (Option<&str>, Option<&str>),
+    terms: &[(&str, u64)],
+    prepare: impl Fn(&Path),
+) {
     let dir = tempfile::tempdir().unwrap();
     let (scene, preset) = setup(dir.path());
     prepare(&scene);
     let out = dir.path().join("out");
-    let mut args = vec!["--method", method, "--steps", "3"];
-    args.extend_from_slice(extra);
-    let o = inpaint(&scene, &preset, &out, &args);
-    check(&o, method);
+    let root = workspace_root();
+    let spec = gb_inpaint::RunSpec {
+        scene: Some(scene.clone()),
+        method: Some(method.into()),
+        preset: s(&preset).into(),
+        prior: prior.map(|p| s(&root.join(p)).to_string()),
+        lora: lora.map(|l| root.join(l)),
+        device: gb_core::BackendKind::Flex,
+        steps: Some(3),
+        out: out.clone(),
+        ..gb_inpaint::RunSpec::default()
+    };
+    let summary = gb_inpaint::run::run(&spec).unwrap_or_else(|e| panic!("{method}: {e}"));
 
     let m = metrics(&out);
+    let written = gb_inpaint::RunSummary::read(&out.join("metrics.json")).unwrap();
+    assert_eq!(written, summary, "metrics.json is the summary");
     assert_eq!(m["method"], method);
     assert_eq!(m["steps"], 3);
     let g = &m["guidance"];
@@ -109,7 +126,7 @@ fn runs(method: &str, extra: &[&str], terms: &[(&str, u64)], prepare: impl Fn(&P
 fn gb_nerf_runs_with_bsd_on_rgb_and_normals_and_the_lora() {
     runs(
         "gb-nerf",
-        &["--prior", PRIOR, "--lora", LORA],
+        (Some(PRIOR), Some(LORA)),
         &[("rgb", 2), ("normal", 2)],
         |_| {},
     );
@@ -120,7 +137,7 @@ fn gb_nerf_unseen_runs_with_visibility_aware_guidance() {
     // 3 steps: the maps start at step 2000 * 3 / 10000 = 0, so every step is guided
     runs(
         "gb-nerf-unseen",
-        &["--prior", PRIOR, "--lora", LORA],
+        (Some(PRIOR), Some(LORA)),
         &[("rgb", 2), ("normal", 2)],
         |_| {},
     );
@@ -130,7 +147,7 @@ fn gb_nerf_unseen_runs_with_visibility_aware_guidance() {
 fn bsd_runs_without_the_lora() {
     runs(
         "bsd",
-        &["--prior", PRIOR],
+        (Some(PRIOR), None),
         &[("rgb", 2), ("normal", 2)],
         |_| {},
     );
@@ -140,7 +157,7 @@ fn bsd_runs_without_the_lora() {
 fn mvip_nerf_runs_with_sds_on_rgb_and_normals() {
     runs(
         "mvip-nerf",
-        &["--prior", PRIOR],
+        (Some(PRIOR), None),
         &[("rgb", 2), ("normal", 2)],
         |_| {},
     );
@@ -148,14 +165,14 @@ fn mvip_nerf_runs_with_sds_on_rgb_and_normals() {
 
 #[test]
 fn spin_nerf_sds_runs_with_sds_on_rgb_only() {
-    runs("spin-nerf-sds", &["--prior", PRIOR], &[("rgb", 2)], |_| {});
+    runs("spin-nerf-sds", (Some(PRIOR), None), &[("rgb", 2)], |_| {});
 }
 
 #[test]
 fn csd_runs_with_three_branches() {
     runs(
         "csd",
-        &["--prior", PRIOR, "--lora", LORA],
+        (Some(PRIOR), Some(LORA)),
         &[("rgb", 3), ("normal", 3)],
         |_| {},
     );
@@ -163,13 +180,13 @@ fn csd_runs_with_three_branches() {
 
 #[test]
 fn none_runs_without_a_prior() {
-    runs("none", &[], &[], |_| {});
+    runs("none", (None, None), &[], |_| {});
 }
 
 #[test]
 fn pre_inpainted_trains_on_the_inpainted_images() {
     // a stand-in for LaMa's output: the training images themselves, named after the views
-    runs("pre-inpainted", &[], &[], |scene| {
+    runs("pre-inpainted", (None, None), &[], |scene| {
         let inpainted = scene.join("RGB_inpainted");
         std::fs::create_dir_all(&inpainted).unwrap();
         for e in std::fs::read_dir(scene.join("images_1/label")).unwrap() {
@@ -238,16 +255,22 @@ fn repeated_non_finite_losses_skip_then_stop_naming_the_last_good_checkpoint() {
     let bsd = std::fs::read_to_string(workspace_root().join("configs/methods/bsd.toml")).unwrap();
     let method = bsd
         .replace("name = \"bsd\"", "name = \"bsd-nan\"")
-        .replace("max_consecutive_nan = 10", "max_consecutive_nan = 2")
-        + "\n[debug]\ninject_nan_from_step = 1\n";
+        .replace("max_consecutive_nan = 10", "max_consecutive_nan = 2");
     let method_path = dir.path().join("bsd-nan.toml");
     std::fs::write(&method_path, method).unwrap();
     let out = dir.path().join("out");
-    let o = inpaint(
-        &scene,
-        &preset,
-        &out,
+    // the loss is made NaN from step 1 by the trainer's fault injection (never a config)
+    let o = gb_tests::xtask_with_env(
         &[
+            "inpaint",
+            "--scene",
+            s(&scene),
+            "--preset",
+            s(&preset),
+            "--out",
+            s(&out),
+            "--device",
+            "flex",
             "--method",
             s(&method_path),
             "--prior",
@@ -255,6 +278,7 @@ fn repeated_non_finite_losses_skip_then_stop_naming_the_last_good_checkpoint() {
             "--steps",
             "10",
         ],
+        &[(gb_inpaint::trainer::INJECT_NAN_ENV, "1")],
     );
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);

@@ -1,16 +1,19 @@
-//! `cargo xtask`: the gb-nerf-rs command line.
+//! `gb-nerf` (in the repository: `cargo xtask`): the gb-nerf-rs command line.
+//! `cargo install --path xtask` installs it as `gb-nerf`; it carries the built-in prior and
+//! the CLIP tokenizer inside (see [`assets`]), so it runs without the source tree.
 //!
 //! Every subcommand lives in its own file under `cmd/`. Errors (argument errors included)
 //! are printed as one clear line, `error: ...` (with their causes), the last line on stderr,
 //! and exit with code 2; nothing a user types ends in a panic. Logs go to stderr without
 //! colour codes unless stderr is a terminal, and hide the progress bars while they print.
 
+mod assets;
 mod cmd;
 
 use std::io::IsTerminal;
 
 use clap::error::ErrorKind;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 /// NeRF object removal with a geometric diffusion prior and Balanced Score Distillation.
 #[derive(Parser)]
@@ -68,7 +71,18 @@ fn init_logging() {
 /// Parses the command line; a usage error is printed as one `error: ...` line (exit 2),
 /// `--help` and `--version` as clap prints them.
 fn parse_cli() -> Cli {
-    match Cli::try_parse() {
+    // run by Cargo (`cargo xtask`, the tests) or as the installed command
+    let name = if std::env::var_os("CARGO").is_some() {
+        "cargo xtask"
+    } else {
+        "gb-nerf"
+    };
+    let parsed = Cli::command()
+        .name(name)
+        .bin_name(name)
+        .try_get_matches()
+        .and_then(|m| Cli::from_arg_matches(&m));
+    match parsed {
         Ok(cli) => cli,
         Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => {
             e.exit()
@@ -97,6 +111,10 @@ fn usage_error_line(rendered: &str) -> String {
 fn main() {
     init_logging();
     let cli = parse_cli();
+    if let Err(e) = assets::install() {
+        eprintln!("error: {}", gb_core::messages::one_line(&format!("{e:#}")));
+        std::process::exit(2);
+    }
     let result = match cli.command {
         Command::Devices(a) => cmd::devices::run(a),
         Command::Eval(a) => cmd::eval::run(a),

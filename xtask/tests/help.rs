@@ -3,7 +3,7 @@
 
 #[test]
 fn help_lists_the_subcommands() {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_xtask"))
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_gb-nerf"))
         .arg("--help")
         .output()
         .expect("cannot start xtask");

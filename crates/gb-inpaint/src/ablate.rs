@@ -1,5 +1,5 @@
-//! The tables of `cargo xtask ablate` (xtask/src/cmd/ablate.rs runs the method grid; this
-//! module turns the runs' `metrics.json` into the paper's two tables and the w3 sweep):
+//! The tables of a method grid ([`crate::grid`] runs it; this module turns the runs'
+//! [`RunSummary`]s into the paper's two tables and the w3 sweep):
 //!
 //! - **baselines**: rows [`BASELINE_ROWS`] (no prior, SPIn-NeRF-style SDS, MVIP-NeRF, CSD,
 //!   GB-NeRF, and this project's visibility-aware GB-NeRF);
@@ -16,6 +16,7 @@
 
 use serde_json::{json, Value};
 
+use crate::run::RunSummary;
 use crate::svg::{LineChart, Series};
 
 /// Baseline comparison: (row label, method).
@@ -57,23 +58,10 @@ pub struct RunOutcome {
     pub method: String,
     /// Output folder, relative to the ablation's folder.
     pub dir: String,
-    /// The run's `metrics.json`, or the error that stopped it.
-    pub result: Result<Value, String>,
+    /// The run's summary (`metrics.json`), or the error that stopped it.
+    pub result: Result<RunSummary, String>,
     /// Wall time of the whole run (training, renders, metrics, report).
     pub seconds: f64,
-}
-
-/// A value of a run: `Ok(number)`, or `Err(reason)`.
-fn value(m: &Value, key: &str) -> Result<f64, String> {
-    let eval = &m["eval"];
-    match &eval[key] {
-        Value::Number(n) => n.as_f64().ok_or_else(|| "not a number".into()),
-        Value::String(s) if s == "inf" => Ok(f64::INFINITY),
-        _ => Err(eval["unavailable"][key]
-            .as_str()
-            .unwrap_or("not computed")
-            .to_string()),
-    }
 }
 
 fn fmt(v: f64) -> String {
@@ -98,7 +86,7 @@ pub const NO_REFERENCE_COLUMNS: &[(&str, &str, bool)] = &[
 fn shown_columns(runs: &[&RunOutcome]) -> Vec<(&'static str, &'static str, bool)> {
     let any_has = |k: &str| {
         runs.iter()
-            .any(|r| r.result.as_ref().is_ok_and(|m| value(m, k).is_ok()))
+            .any(|r| r.result.as_ref().is_ok_and(|m| m.eval_value(k).is_ok()))
     };
     if !any_has("psnr") && NO_REFERENCE_COLUMNS.iter().any(|(k, _, _)| any_has(k)) {
         return NO_REFERENCE_COLUMNS.to_vec();
@@ -130,7 +118,7 @@ pub fn table(title: &str, rows: &[(String, &RunOutcome)]) -> (String, Value) {
         match &r.result {
             Ok(m) => {
                 for (k, _, _) in &cols {
-                    match value(m, k) {
+                    match m.eval_value(k) {
                         Ok(v) => {
                             md.push_str(&format!(" {} |", fmt(v)));
                             jr[*k] = gb_eval::report::json_number(v);
@@ -142,8 +130,8 @@ pub fn table(title: &str, rows: &[(String, &RunOutcome)]) -> (String, Value) {
                         }
                     }
                 }
-                let steps = m["steps"].as_f64().unwrap_or(f64::NAN);
-                let secs = m["train_seconds_this_run"].as_f64().unwrap_or(f64::NAN);
+                let steps = m.steps as f64;
+                let secs = m.train_seconds_this_run;
                 md.push_str(&format!(
                     " {} | {:.1} | {:.3} |\n",
                     steps,
@@ -152,7 +140,7 @@ pub fn table(title: &str, rows: &[(String, &RunOutcome)]) -> (String, Value) {
                 ));
                 jr["steps"] = json!(steps);
                 jr["train_seconds"] = json!(secs);
-                jr["metrics"] = m["eval"].clone();
+                jr["metrics"] = m.eval.clone();
             }
             Err(e) => {
                 md.push_str(&" failed |".repeat(cols.len() + 3));
@@ -170,7 +158,7 @@ pub fn table(title: &str, rows: &[(String, &RunOutcome)]) -> (String, Value) {
                 r.result
                     .as_ref()
                     .ok()
-                    .and_then(|m| value(m, "lpips_bbox").err())
+                    .and_then(|m| m.eval_value("lpips_bbox").err())
             })
             .unwrap_or_else(|| "no run finished".into());
         reasons.insert(0, format!("- ST-LPIPS column omitted: {why}"));
@@ -206,7 +194,7 @@ pub fn w3_charts(runs: &[(f64, &RunOutcome)]) -> Vec<(String, LineChart)> {
                     .result
                     .as_ref()
                     .ok()
-                    .and_then(|m| value(m, key).ok())
+                    .and_then(|m| m.eval_value(key).ok())
                     .unwrap_or(f64::NAN);
                 (*w3, v)
             })
@@ -238,7 +226,12 @@ mod tests {
             label: method.into(),
             method: method.into(),
             dir: method.into(),
-            result: Ok(json!({"eval": eval, "steps": 4, "train_seconds_this_run": 2.0})),
+            result: Ok(RunSummary {
+                eval,
+                steps: 4,
+                train_seconds_this_run: 2.0,
+                ..RunSummary::default()
+            }),
             seconds: 3.0,
         }
     }
@@ -277,7 +270,7 @@ mod tests {
         // a scene without ground truth: the no-reference columns
         let mut real = run("none", 0.5, None);
         if let Ok(m) = &mut real.result {
-            m["eval"] = json!({"psnr": null, "brisque": 41.5, "brisque_bbox": 55.25,
+            m.eval = json!({"psnr": null, "brisque": 41.5, "brisque_bbox": 55.25,
                 "unavailable": {"psnr": "the scene has no test view with ground truth"}});
         }
         let (md, js) = table("Statue", &[("none".to_string(), &real)]);

@@ -89,6 +89,31 @@ pub enum InpaintError {
         /// Where the last good checkpoint is, in words.
         checkpoint: String,
     },
+    /// A field of a run's specification ([`crate::run::RunSpec`], named as its command-line
+    /// flag) or a file it names is unusable.
+    #[error("{field}: {reason}")]
+    Spec {
+        /// The field (`--out`, `--baseline`, ...) or file.
+        field: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The scene could not be loaded or generated.
+    #[error("{what} {path}: {source}")]
+    Scene {
+        /// `loading scene` or `generating scene`.
+        what: &'static str,
+        /// The scene folder.
+        path: PathBuf,
+        /// The cause.
+        source: Box<gb_nerf::scene::SceneError>,
+    },
+    /// The prior could not be resolved (`tiny`, folder, hub id).
+    #[error(transparent)]
+    Checkpoint(#[from] gb_diffusion::checkpoint::CheckpointError),
+    /// A metric could not be computed.
+    #[error("metric: {0}")]
+    Metric(#[from] gb_eval::MetricError),
     /// The NeRF side failed (config, scene contents, checkpoint).
     #[error(transparent)]
     Nerf(#[from] NerfError),

@@ -42,14 +42,14 @@ use std::time::Instant;
 
 use gb_nerf::scene::{Camera, Scene, Split};
 use gb_nerf::train::data::downscale_camera;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::InpaintError;
 use crate::gif::{orbit_path, ORBIT_FPS};
 use crate::GuidedTrainer;
 
 /// What [`write_export`] wrote.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct ExportInfo {
     /// The export folder.
     pub folder: PathBuf,

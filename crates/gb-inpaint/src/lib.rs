@@ -22,16 +22,22 @@
 //!   our own rather than a plotting crate, see [`svg`]) and the orbit animation;
 //! - [`visibility`]: visibility-aware guidance (the prior acts only where no training view
 //!   sees the surface);
-//! - [`ablate`]: the tables of `cargo xtask ablate` (baselines, ablation, w3 sweep);
+//! - [`run`]: one object-removal run as a library call ([`run::run`] on a [`RunSpec`],
+//!   returning a [`RunSummary`], its `metrics.json`);
+//! - [`grid`]: the method grid as independent cells (planned, run by index, merged; Slurm
+//!   and Kubernetes job files);
+//! - [`ablate`]: the grid's tables (baselines, ablation, w3 sweep);
 //! - [`export`]: the run's inpainted scene as a nerfstudio dataset (`OUT/export/`).
 //!
-//! The command line is `cargo xtask inpaint` (xtask/src/cmd/inpaint.rs).
+//! The command line is `cargo xtask inpaint` (xtask/src/cmd/inpaint.rs), a thin call of
+//! [`run::run`].
 
 pub mod ablate;
 pub mod crop;
 pub mod error;
 pub mod export;
 pub mod gif;
+pub mod grid;
 pub mod guidance;
 pub mod method;
 pub mod metrics;
@@ -39,6 +45,7 @@ pub mod pre_inpainted;
 pub mod prior;
 pub mod report;
 pub mod resume;
+pub mod run;
 pub mod svg;
 pub mod trainer;
 pub mod visibility;
@@ -47,4 +54,5 @@ pub use error::InpaintError;
 pub use guidance::Modality;
 pub use method::{MethodConfig, PromptOverrides, Prompts, SceneCaptions};
 pub use prior::{lora_for, GuidancePrior, PriorInfo};
+pub use run::{RunSpec, RunSummary};
 pub use trainer::{FitOptions, FitSummary, GuidedTrainer, StepRecord, TermRecord};

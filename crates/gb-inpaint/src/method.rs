@@ -349,21 +349,6 @@ pub struct Prompts {
     pub geometry_negative: String,
 }
 
-/// Test hooks (not for users): they make failure paths reachable in tests.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DebugHooks {
-    /// From this step on, the total loss is made NaN (exercises the non-finite-loss policy).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub inject_nan_from_step: Option<usize>,
-}
-
-impl DebugHooks {
-    fn is_default(&self) -> bool {
-        *self == Self::default()
-    }
-}
-
 /// A method: the guidance of each modality and everything around it (see the module docs).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -430,9 +415,6 @@ pub struct MethodConfig {
     /// views observe (off by default; see [`crate::visibility`]).
     #[serde(default)]
     pub visibility: VisibilityConfig,
-    /// Test hooks.
-    #[serde(default, skip_serializing_if = "DebugHooks::is_default")]
-    pub debug: DebugHooks,
 }
 
 fn default_lambda() -> f64 {

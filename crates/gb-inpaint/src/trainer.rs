@@ -221,7 +221,16 @@ pub struct GuidedTrainer {
     identity: toml::Value,
     nan_streak: usize,
     last_good_checkpoint: Option<(PathBuf, usize)>,
+    /// Fault injection for the tests of the non-finite-loss policy, never set by a config:
+    /// from this step on the total loss is made NaN. Initialised from
+    /// [`INJECT_NAN_ENV`] (for the end-to-end test of the command).
+    #[doc(hidden)]
+    pub inject_nan_from_step: Option<usize>,
 }
+
+/// The environment variable that sets [`GuidedTrainer::inject_nan_from_step`] (tests only).
+#[doc(hidden)]
+pub const INJECT_NAN_ENV: &str = "GB_TEST_INJECT_NAN_FROM_STEP";
 
 impl std::ops::Deref for GuidedTrainer {
     type Target = Trainer;
@@ -493,6 +502,9 @@ impl GuidedTrainer {
             identity,
             nan_streak: 0,
             last_good_checkpoint: None,
+            inject_nan_from_step: std::env::var(INJECT_NAN_ENV)
+                .ok()
+                .and_then(|v| v.parse().ok()),
         })
     }
 
@@ -826,12 +838,7 @@ impl GuidedTrainer {
         for t in terms {
             loss = loss + t.loss;
         }
-        if self
-            .method
-            .debug
-            .inject_nan_from_step
-            .is_some_and(|s| step >= s)
-        {
+        if self.inject_nan_from_step.is_some_and(|s| step >= s) {
             loss = loss.add_scalar(f32::NAN);
         }
         let recon_value: f32 = recon.loss.detach().into_scalar();

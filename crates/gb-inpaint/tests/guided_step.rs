@@ -286,9 +286,9 @@ fn non_finite_losses_are_skipped_then_stop_the_run_naming_the_last_good_checkpoi
     let dir = tempfile::tempdir().unwrap();
     let s = scene(dir.path());
     let mut t = guided(&s, dir.path(), "none", |m| {
-        m.debug.inject_nan_from_step = Some(2);
         m.max_consecutive_nan = 3;
     });
+    t.inject_nan_from_step = Some(2);
     t.config.train.steps = 10;
     t.config.train.checkpoint_every = 1;
     let ckpt = dir.path().join("out/checkpoint.bin");

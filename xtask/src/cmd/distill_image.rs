@@ -100,7 +100,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("creating {}", args.out.display()))?;
 
     let device = kind.device();
-    let prior_dir = super::finetune::resolve_prior(&args.prior)?;
+    let prior_dir = gb_diffusion::checkpoint::resolve_prior(&args.prior)?;
     let prior = SdPrior::load(&prior_dir, &device)
         .with_context(|| format!("loading the prior from {}", prior_dir.display()))?;
     let resolution = args.resolution.unwrap_or(prior.resolution);

@@ -15,7 +15,6 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use gb_core::BackendKind;
-use gb_diffusion::checkpoint::hub;
 use gb_diffusion::inpaint::InpaintPrior;
 use gb_finetune::captions::CaptionMode;
 use gb_finetune::diode::{DiodeDataset, DiodeSplit};
@@ -123,39 +122,6 @@ pub struct Args {
     pub quiet: bool,
 }
 
-/// The folder of a `--base`/`--prior` argument: `tiny`, a local folder, or a hub id. A
-/// single-file checkpoint, or a folder with PyTorch pickle weights only, is refused here,
-/// before anything is loaded, with the command that converts it to safetensors.
-pub fn resolve_prior(spec: &str) -> anyhow::Result<PathBuf> {
-    let dir = locate_prior(spec)?;
-    gb_diffusion::checkpoint::DiffusersFolder::open(&dir)
-        .and_then(|folder| folder.check_weight_formats())
-        .with_context(|| format!("prior `{spec}`"))?;
-    Ok(dir)
-}
-
-fn locate_prior(spec: &str) -> anyhow::Result<PathBuf> {
-    if spec == "tiny" {
-        let dir = gb_core::tiny_prior_dir();
-        if !dir.join("model_index.json").is_file() {
-            bail!(
-                "the built-in prior is missing at {} (reproduce it with `cargo xtask finetune --synthetic --from-scratch --out out/tiny` and copy out/tiny/prior there)",
-                dir.display()
-            );
-        }
-        return Ok(dir);
-    }
-    let path = Path::new(spec);
-    if path.exists() {
-        return Ok(path.to_path_buf());
-    }
-    if hub::is_hub_id(spec) {
-        return hub::resolve(spec, &hub::HubSettings::from_env())
-            .with_context(|| format!("prior `{spec}`"));
-    }
-    bail!("prior `{spec}`: no such folder, and not a hub id (owner/name)")
-}
-
 fn config_of(args: &Args, native: usize) -> anyhow::Result<FinetuneConfig> {
     let mut cfg = match &args.config {
         Some(p) => {
@@ -219,7 +185,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .base
         .as_deref()
         .context("--base MODEL is required (a diffusers inpainting folder, a hub id, or `tiny`)")?;
-    let base_dir = resolve_prior(base)?;
+    let base_dir = gb_diffusion::checkpoint::resolve_prior(base)?;
     let (train, val): (Box<dyn PairSource>, Option<Box<dyn PairSource>>) =
         if let Some(d) = &args.diode {
             let train = DiodeDataset::open(d, DiodeSplit::Train, args.captions.as_deref())?;

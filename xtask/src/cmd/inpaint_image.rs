@@ -71,7 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let kind = args.device.unwrap_or_default();
     let device = kind.device();
-    let prior_dir = super::finetune::resolve_prior(&args.prior)?;
+    let prior_dir = gb_diffusion::checkpoint::resolve_prior(&args.prior)?;
     let prior = InpaintPrior::load(&prior_dir, &device)
         .with_context(|| format!("loading prior {}", prior_dir.display()))?;
     tracing::info!(device = %kind, steps = args.steps, "prior loaded from {}", prior_dir.display());

@@ -107,4 +107,20 @@ pub enum CheckpointError {
         /// What went wrong.
         message: String,
     },
+    /// A prior specification (`tiny`, a folder, a hub id) that names no usable prior.
+    #[error("prior `{spec}`: {message}")]
+    PriorSpec {
+        /// The specification given.
+        spec: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The prior named by `spec` was found but is unusable.
+    #[error("prior `{spec}`: {source}")]
+    Prior {
+        /// The specification given.
+        spec: String,
+        /// The cause.
+        source: Box<CheckpointError>,
+    },
 }

@@ -9,6 +9,8 @@
 //! - [`header`]: a safetensors file's layout checked from its header (truncated files).
 //! - [`hub`]: resolving a hub id to a local folder through the hub cache, offline first,
 //!   and downloading a pipeline snapshot into that cache with `hf-hub`.
+//! - [`resolve`]: [`resolve_prior`], the one resolver of a prior specification (`tiny`, a
+//!   folder, a hub id).
 
 pub mod error;
 pub mod folder;
@@ -16,10 +18,12 @@ pub mod header;
 pub mod hub;
 pub mod keymap;
 pub mod load;
+pub mod resolve;
 pub mod save;
 
 pub use error::CheckpointError;
 pub use folder::{DiffusersFolder, WeightVariant};
 pub use keymap::KeymapSection;
 pub use load::{load_module, LoadReport};
+pub use resolve::{resolve_prior, PriorSpec};
 pub use save::save_module;

@@ -17,7 +17,6 @@
 pub mod alphas;
 pub mod bsd;
 pub mod conditioning;
-pub mod config;
 pub mod csd;
 pub mod diagnostics;
 pub mod eps;
@@ -35,7 +34,6 @@ pub mod view_step;
 pub use alphas::AlphasCumprod;
 pub use bsd::Bsd;
 pub use conditioning::{PromptCache, PromptEncoder, ViewCache, ViewConditioning};
-pub use config::{DistillConfig, Prompts};
 pub use csd::Csd;
 pub use diagnostics::StepDiagnostics;
 pub use eps::{EpsBatch, InpaintEpsPredictor, LatentEncoder};

@@ -236,7 +236,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &device,
         )?,
         spec => {
-            let dir = crate::cmd::finetune::resolve_prior(spec)?;
+            let dir = gb_diffusion::checkpoint::resolve_prior(spec)?;
             GuidancePrior::load(&dir, None, &device)?
         }
     };

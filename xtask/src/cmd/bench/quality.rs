@@ -178,7 +178,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 None => args.work.join(name.to_string()),
             };
             let outcome = crate::cmd::ablate::run(crate::cmd::ablate::Args {
-                scene: scene_dir.clone(),
+                scene: Some(scene_dir.clone()),
                 grid: args.grid.clone(),
                 lora: None,
                 seed: *seed,
@@ -186,6 +186,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 w3: Some(Vec::new()),
                 weights: None,
                 orbit_frames: 0,
+                emit: None,
+                image: String::new(),
+                cpus: 1,
+                gpus: 0,
+                grid_dir: None,
+                cell: None,
+                merge: false,
             });
             if let Err(e) = &outcome {
                 errors.push(format!("seed {seed:?}: {e:#}"));

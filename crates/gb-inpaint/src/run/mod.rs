@@ -1,0 +1,283 @@
+//! One object-removal run, the project's main operation, as a library call:
+//! [`run`]`(&`[`RunSpec`]`) -> `[`RunSummary`]. `cargo xtask inpaint` parses its flags into a
+//! [`RunSpec`]; the method grid ([`crate::grid`]), the benchmarks and the end-to-end tests
+//! call [`run`] directly.
+//!
+//! A run resolves and checks everything a user can get wrong before it trains (method and
+//! preset, prior and LoRA, scene and masks, output and baseline folders), trains with an
+//! atomic checkpoint (resumable exactly), then writes into `spec.out`:
+//! `config.toml` (the reproducing command and the resolved configuration),
+//! `train_log.jsonl`, `renders/`, `metrics.json` (the [`RunSummary`]), `export/`
+//! (nerfstudio), `orbit.gif` and `report.html`.
+
+mod config_file;
+mod setup;
+pub mod summary;
+mod test_views;
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use gb_core::BackendKind;
+
+pub use config_file::shell_quote;
+pub use setup::{load_method, load_preset, method_and_prior};
+pub use summary::{GuidanceSummary, MeanMetrics, OrbitSummary, RunSummary, ViewMetrics, NOTES};
+pub use test_views::disparity_map;
+
+use crate::error::InpaintError;
+use crate::method::{PromptOverrides, SceneCaptions};
+use crate::metrics::{evaluate, evaluate_without_reference, MetricOptions};
+use crate::prior::{lora_for, GuidancePrior};
+use crate::report::RunPage;
+use crate::trainer::{FitOptions, GuidedTrainer};
+
+/// Everything one run needs. Field names follow `cargo xtask inpaint`'s flags, and errors
+/// name a field by its flag.
+#[derive(Debug, Clone)]
+pub struct RunSpec {
+    /// Scene folder (LLFF / SPIn-NeRF or Blender layout); `None`: the procedural `stairs`
+    /// scene, generated into `OUT/scene`.
+    pub scene: Option<PathBuf>,
+    /// A built-in method name or a `.toml` file (a method, or a run's `config.toml`);
+    /// `None`: `gb-nerf` (or `none` when `prior` is `none`).
+    pub method: Option<String>,
+    /// A preset name (fast, balanced, paper) or a `.toml` file.
+    pub preset: String,
+    /// The prior: `tiny`, a diffusers folder, a hub id, or `none`; `None`: `tiny`.
+    pub prior: Option<String>,
+    /// A LoRA file to attach (default: the prior's own for methods with `use_lora`).
+    pub lora: Option<PathBuf>,
+    /// Prompts replacing the method's templates.
+    pub prompts: PromptOverrides,
+    /// The compute backend.
+    pub device: BackendKind,
+    /// Overrides the preset's training seed.
+    pub seed: Option<u64>,
+    /// Overrides the preset's number of steps.
+    pub steps: Option<usize>,
+    /// The output folder.
+    pub out: PathBuf,
+    /// Continue from `OUT/checkpoint.bin` when it exists.
+    pub resume: bool,
+    /// Another run's folder, whose renders are the report's baseline column.
+    pub baseline: Option<PathBuf>,
+    /// Folder of metric weights (default `$GB_TEST_DATA/weights` when it exists).
+    pub weights: Option<PathBuf>,
+    /// Frames of `orbit.gif` (0: none).
+    pub orbit_frames: usize,
+    /// Show progress bars.
+    pub progress: bool,
+}
+
+impl Default for RunSpec {
+    fn default() -> Self {
+        Self {
+            scene: None,
+            method: None,
+            preset: "fast".into(),
+            prior: None,
+            lora: None,
+            prompts: PromptOverrides::default(),
+            device: BackendKind::default(),
+            seed: None,
+            steps: None,
+            out: PathBuf::from("out/inpaint"),
+            resume: false,
+            baseline: None,
+            weights: None,
+            orbit_frames: 24,
+            progress: false,
+        }
+    }
+}
+
+/// The prior and LoRA of `method`, resolved and loaded; `None` for a method without
+/// guidance (a LoRA given to one is an error).
+fn load_prior(
+    spec: &RunSpec,
+    method: &crate::MethodConfig,
+    prior_spec: Option<&str>,
+) -> Result<Option<GuidancePrior>, InpaintError> {
+    if !method.needs_prior() {
+        if let Some(p) = spec.prior.as_deref().filter(|p| *p != "none") {
+            tracing::info!(prior = p, method = %method.name, "method has no guidance: prior not used");
+        }
+        if let Some(l) = &spec.lora {
+            return Err(InpaintError::Spec {
+                field: format!("--lora {}", l.display()),
+                reason: format!(
+                    "method '{}' has no guidance, so there is no prior to attach it to",
+                    method.name
+                ),
+            });
+        }
+        return Ok(None);
+    }
+    let prior_spec = prior_spec.ok_or_else(|| InpaintError::PriorRequired {
+        method: method.name.clone(),
+    })?;
+    let dir = gb_diffusion::checkpoint::resolve_prior(prior_spec)?;
+    let lora = lora_for(method, &dir, spec.lora.as_deref())?;
+    tracing::info!(prior = %dir.display(), lora = ?lora, "loading the prior");
+    Ok(Some(GuidancePrior::load(
+        &dir,
+        lora.as_deref(),
+        &spec.device.device(),
+    )?))
+}
+
+/// Runs one object removal (see the module docs) and returns what it measured, also
+/// written as `OUT/metrics.json`.
+pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
+    let device = spec.device;
+    setup::check_paths(spec)?;
+    let (method_name, prior_spec) = method_and_prior(spec);
+    let method = load_method(&method_name)?;
+    let mut config = load_preset(&spec.preset)?;
+    if let Some(steps) = spec.steps {
+        config.train.steps = steps;
+    }
+    if let Some(seed) = spec.seed {
+        config.train.seed = seed;
+    }
+    let prior = load_prior(spec, &method, prior_spec.as_deref())?;
+
+    let (scene_dir, mut scene) = setup::load_or_generate(spec)?;
+    setup::require_masks(&scene)?;
+    let pre = if method.pre_inpainted {
+        Some(crate::pre_inpainted::apply(&mut scene, &scene_dir)?)
+    } else {
+        None
+    };
+    let prompts = method.resolve_prompts(&SceneCaptions::read(&scene_dir), &spec.prompts);
+    let prior_info = prior.as_ref().map(|p| p.info.clone());
+
+    let out = &spec.out;
+    std::fs::create_dir_all(out).map_err(|e| InpaintError::Spec {
+        field: format!("--out {}", out.display()),
+        reason: format!("cannot create the output folder: {e}"),
+    })?;
+    let ckpt = out.join("checkpoint.bin");
+    let resuming = spec.resume && ckpt.is_file();
+    if spec.resume && !resuming {
+        tracing::warn!(
+            "--resume: no checkpoint at {}, so the run starts afresh",
+            ckpt.display()
+        );
+    }
+    let guidance = prior.map(|p| (p, prompts.clone()));
+    let mut trainer = if resuming {
+        tracing::info!(path = %ckpt.display(), "resuming");
+        GuidedTrainer::resume_matching(&scene, &ckpt, method.clone(), guidance, device, config)?
+    } else {
+        GuidedTrainer::new(&scene, config, method.clone(), guidance, device)?
+    };
+    config_file::write_config(
+        spec,
+        &config_file::ResolvedRun {
+            scene_dir: &scene_dir,
+            trainer: &trainer,
+            method: &method,
+            prompts: &prompts,
+            prior_spec: prior_spec.as_deref(),
+            prior: prior_info.as_ref(),
+            pre: pre.as_ref(),
+            resumed: resuming,
+        },
+    )?;
+    tracing::info!(
+        scene = %scene.name, preset = %trainer.config.name, method = %method.name,
+        device = %device, train_views = trainer.data.views.len(),
+        pixels = trainer.data.pixels.len(), steps = trainer.config.train.steps,
+        guided_views = trainer.guidance.as_ref().map_or(0, |g| g.views.len()),
+        normal_start = trainer.normal_start(),
+        "training"
+    );
+    let fit = trainer.fit(&FitOptions {
+        checkpoint: Some(ckpt.clone()),
+        log: Some(out.join("train_log.jsonl")),
+        append_log: resuming,
+        progress: spec.progress,
+    })?;
+
+    let render_start = Instant::now();
+    let (views, pairs) = test_views::render_test_views(&out.join("renders"), &scene, &trainer)?;
+    // a scene without test views: its masked training views, scored without a reference
+    let train_views = if pairs.is_empty() {
+        crate::report::render_masked_train_views(out, &scene, &trainer)?
+    } else {
+        Vec::new()
+    };
+    let render_seconds = render_start.elapsed().as_secs_f64();
+    let eval_start = Instant::now();
+    let metric_options = MetricOptions::new(spec.weights.clone(), device);
+    let eval = if pairs.is_empty() {
+        let renders: Vec<_> = train_views.iter().map(|t| t.render.clone()).collect();
+        evaluate_without_reference(&renders, &metric_options)
+    } else {
+        evaluate(&pairs, &metric_options)
+    };
+    let eval_seconds = eval_start.elapsed().as_secs_f64();
+    let orbit = crate::gif::write_orbit(out, &scene, &trainer, spec.orbit_frames)?;
+    let mut export =
+        crate::export::write_export(&out.join("export"), &scene, &trainer, spec.orbit_frames)?;
+    // relative to the run folder, like `report`: metrics.json does not depend on where it lies
+    export.folder = PathBuf::from("export");
+    let per_step = |secs: f64, n: usize| (n > 0).then(|| secs / n as f64);
+    let summary = RunSummary {
+        method: method.name.clone(),
+        prior: prior_info
+            .as_ref()
+            .map_or_else(|| "none".into(), |p| p.folder.display().to_string()),
+        lora: prior_info.as_ref().and_then(|p| p.lora.clone()),
+        scene: scene.name.clone(),
+        preset: trainer.config.name.clone(),
+        device: device.name().to_string(),
+        steps: trainer.step,
+        train_seconds_this_run: fit.seconds,
+        render_seconds,
+        eval_seconds,
+        export,
+        orbit: orbit.map(|o| OrbitSummary {
+            file: "orbit.gif".into(),
+            frames: o.frames,
+            width: o.width,
+            height: o.height,
+            seconds: o.seconds,
+        }),
+        samples_per_ray: trainer.config.sampler.samples_per_ray,
+        mean_train_evaluations_per_ray: fit.mean_evaluations_per_ray,
+        guidance: GuidanceSummary {
+            guided_steps: fit.guided_steps,
+            unguided_steps: fit.unguided_steps,
+            skipped_steps: fit.skipped_steps,
+            seconds_per_guided_step: per_step(fit.guided_seconds, fit.guided_steps),
+            seconds_per_unguided_step: per_step(fit.unguided_seconds, fit.unguided_steps),
+            unet_calls: fit.unet_calls,
+            normal_start: trainer.normal_start(),
+            resolution: prior_info.as_ref().map(|p| p.resolution),
+        },
+        test_views: views.len(),
+        mean: MeanMetrics::of(&views),
+        views,
+        eval: eval.to_json(),
+        report: "report.html".into(),
+        notes: NOTES.into(),
+    };
+    summary.write(&out.join("metrics.json"))?;
+    let metrics_json = serde_json::to_value(&summary)
+        .map_err(|e| InpaintError::io(out.join("metrics.json"), std::io::Error::other(e)))?;
+    crate::report::write_run_report(&RunPage {
+        out,
+        scene: &scene,
+        trainer: &trainer,
+        pairs: &pairs,
+        train_views: &train_views,
+        eval: &eval,
+        metrics: &metrics_json,
+        baseline: spec.baseline.as_deref(),
+        orbit: summary.orbit.is_some(),
+    })?;
+    Ok(summary)
+}
