@@ -58,6 +58,27 @@ pub const FIXTURE_PRIOR: &str = "crates/gb-diffusion/tests/fixtures/sd_image/pip
 pub const FIXTURE_LORA: &str =
     "crates/gb-diffusion/tests/fixtures/sd_text/lora/unet_lora.safetensors";
 
+/// The flags of the small method grid of the grid tests: `none` and `mvip-nerf` on `scene`
+/// with the fixture prior and LoRA, `preset`, 2 steps, on flex.
+pub fn small_grid_flags<'a>(scene: &'a str, preset: &'a str) -> Vec<&'a str> {
+    vec![
+        "--scene",
+        scene,
+        "--methods",
+        "none,mvip-nerf",
+        "--prior",
+        FIXTURE_PRIOR,
+        "--lora",
+        FIXTURE_LORA,
+        "--preset",
+        preset,
+        "--steps",
+        "2",
+        "--device",
+        "flex",
+    ]
+}
+
 /// A path as `&str` (test paths are UTF-8).
 pub fn path_str(p: &std::path::Path) -> &str {
     p.to_str().expect("non-UTF-8 test path")

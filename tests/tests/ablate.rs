@@ -9,7 +9,6 @@ use std::path::Path;
 use gb_tests::xtask;
 
 use gb_tests::{path_str as s, small_preset, small_stairs};
-use gb_tests::{FIXTURE_LORA as LORA, FIXTURE_PRIOR as PRIOR};
 
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
@@ -21,26 +20,10 @@ fn ablate_runs_the_grid_and_writes_the_tables() {
     let scene = small_stairs(dir.path(), 128, 96, 0);
     let preset = small_preset(dir.path(), None);
     let out = dir.path().join("ablate");
-    let o = xtask(&[
-        "ablate",
-        "--scene",
-        s(&scene),
-        "--methods",
-        "none,mvip-nerf",
-        "--w3=0.5",
-        "--prior",
-        PRIOR,
-        "--lora",
-        LORA,
-        "--preset",
-        s(&preset),
-        "--steps",
-        "2",
-        "--device",
-        "flex",
-        "--out",
-        s(&out),
-    ]);
+    let mut args = vec!["ablate"];
+    args.extend(gb_tests::small_grid_flags(s(&scene), s(&preset)));
+    args.extend(["--w3=0.5", "--out", s(&out)]);
+    let o = xtask(&args);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "ablate failed: {err}");
 

@@ -7,8 +7,9 @@
 use std::path::Path;
 
 use gb_inpaint::grid::emit::{kubernetes_job, EmitOptions};
-use gb_tests::{assert_success, path_str as s, small_preset, small_stairs, xtask};
-use gb_tests::{FIXTURE_LORA as LORA, FIXTURE_PRIOR as PRIOR};
+use gb_tests::{
+    assert_success, path_str as s, small_grid_flags, small_preset, small_stairs, xtask,
+};
 use serde_json::Value;
 
 fn json(path: &Path) -> Value {
@@ -38,24 +39,9 @@ fn a_two_cell_grid_runs_by_index_and_merges_like_the_single_process_ablate() {
     let scene = small_stairs(dir.path(), 128, 96, 0);
     let preset = small_preset(dir.path(), None);
     let (grid, single) = (dir.path().join("grid"), dir.path().join("single"));
-    let common = [
-        "--scene",
-        s(&scene),
-        "--methods",
-        "none,mvip-nerf",
-        "--prior",
-        PRIOR,
-        "--lora",
-        LORA,
-        "--preset",
-        s(&preset),
-        "--steps",
-        "2",
-        "--device",
-        "flex",
-    ];
+    let common = small_grid_flags(s(&scene), s(&preset));
     let mut emit = vec!["ablate"];
-    emit.extend(common);
+    emit.extend(&common);
     emit.extend(["--emit", "slurm,kubernetes", "--out", s(&grid)]);
     assert_success(&xtask(&emit), "ablate --emit");
     let planned = gb_inpaint::grid::Grid::read(&grid).unwrap();
@@ -92,7 +78,7 @@ fn a_two_cell_grid_runs_by_index_and_merges_like_the_single_process_ablate() {
     assert_success(&xtask(&["ablate", "--grid", g, "--merge"]), "--merge");
 
     let mut one = vec!["ablate"];
-    one.extend(common);
+    one.extend(&common);
     one.extend(["--out", s(&single)]);
     assert_success(&xtask(&one), "ablate");
     for table in ["baselines.json", "ablation.json", "w3_sweep.json"] {

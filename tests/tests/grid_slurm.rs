@@ -11,8 +11,9 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
-use gb_tests::{assert_success, path_str as s, small_preset, small_stairs, xtask};
-use gb_tests::{FIXTURE_LORA as LORA, FIXTURE_PRIOR as PRIOR};
+use gb_tests::{
+    assert_success, path_str as s, small_grid_flags, small_preset, small_stairs, xtask,
+};
 
 fn slurm_available() -> bool {
     std::env::var_os("SLURM_CONF").is_some()
@@ -42,29 +43,10 @@ fn the_slurm_array_job_runs_every_cell() {
     let scene = small_stairs(dir.path(), 128, 96, 0);
     let preset = small_preset(dir.path(), None);
     let grid = dir.path().join("grid");
-    let emitted = xtask(&[
-        "ablate",
-        "--scene",
-        s(&scene),
-        "--methods",
-        "none,mvip-nerf",
-        "--prior",
-        PRIOR,
-        "--lora",
-        LORA,
-        "--preset",
-        s(&preset),
-        "--steps",
-        "2",
-        "--device",
-        "flex",
-        "--cpus",
-        "1",
-        "--emit",
-        "slurm",
-        "--out",
-        s(&grid),
-    ]);
+    let mut args = vec!["ablate"];
+    args.extend(small_grid_flags(s(&scene), s(&preset)));
+    args.extend(["--cpus", "1", "--emit", "slurm", "--out", s(&grid)]);
+    let emitted = xtask(&args);
     assert_success(&emitted, "ablate --emit slurm");
     let start = Instant::now();
     let submitted = Command::new("sbatch")

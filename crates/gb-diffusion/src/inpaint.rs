@@ -9,13 +9,15 @@
 
 use std::path::Path;
 
-use burn::tensor::{Device, Int, Tensor, TensorData};
+use burn::tensor::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 
-use crate::checkpoint::{CheckpointError, DiffusersFolder, WeightVariant};
-use crate::clip::text_model::{load_text_encoder, ClipTextModel};
+use crate::checkpoint::CheckpointError;
+use crate::clip::text_model::ClipTextModel;
+use crate::clip::{encode_prompts, PromptError};
 use crate::config::{SchedulerConfig, UNet2DConditionConfig};
-use crate::models::{load_unet, load_vae, AutoencoderKL, UNet2DConditionModel};
+use crate::models::{AutoencoderKL, UNet2DConditionModel};
+use crate::pipeline::{ComponentError, SdComponents};
 use crate::scheduler::{DdimScheduler, SchedulerError};
 use crate::tokenizer::ClipTokenizer;
 
@@ -25,12 +27,12 @@ pub enum InpaintError {
     /// A component could not be loaded.
     #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
-    /// The tokenizer failed.
-    #[error("tokenizer: {0}")]
-    Tokenizer(String),
-    /// The text encoder rejected the ids.
-    #[error("text encoder: {0}")]
-    TextEncoder(String),
+    /// A component of the folder could not be loaded.
+    #[error(transparent)]
+    Component(#[from] ComponentError),
+    /// A prompt could not be encoded.
+    #[error(transparent)]
+    Prompt(#[from] PromptError),
     /// The scheduler rejected a request.
     #[error(transparent)]
     Scheduler(#[from] SchedulerError),
@@ -71,35 +73,24 @@ pub struct InpaintPrior {
 }
 
 impl InpaintPrior {
-    /// Loads every component of a diffusers inpainting folder onto `device`.
+    /// Loads every component of a diffusers inpainting folder onto `device`
+    /// ([`SdComponents::load`]); a U-Net without the 9 inpainting channels is refused.
     pub fn load(root: &Path, device: &Device) -> Result<Self, InpaintError> {
-        let folder = DiffusersFolder::open(root)?;
-        let tokenizer = ClipTokenizer::from_dir(&folder.component_dir("tokenizer")?)
-            .map_err(|e| InpaintError::Tokenizer(e.to_string()))?;
-        let text_encoder = load_text_encoder(&folder, WeightVariant::Auto, device)
-            .map_err(|e| InpaintError::TextEncoder(e.to_string()))?;
-        let (unet, unet_config) = load_unet(root, device)?;
-        if unet_config.in_channels != 9 {
+        let c = SdComponents::load(root, device, device)?;
+        if c.unet_config.in_channels != 9 {
             return Err(InpaintError::NotInpainting {
                 path: root.join("unet/config.json").display().to_string(),
-                found: unet_config.in_channels,
+                found: c.unet_config.in_channels,
             });
         }
-        let (vae, vae_config) = load_vae(root, device)?;
-        let sched_path = root.join("scheduler/scheduler_config.json");
-        let scheduler_config = if sched_path.is_file() {
-            SchedulerConfig::from_file(&sched_path).map_err(CheckpointError::from)?
-        } else {
-            SchedulerConfig::default()
-        };
         Ok(Self {
-            tokenizer,
-            text_encoder,
-            unet,
-            unet_config,
-            vae,
-            vae_scale_factor: vae_config.scale_factor(),
-            scheduler_config,
+            tokenizer: c.tokenizer,
+            text_encoder: c.text_encoder,
+            unet: c.unet,
+            unet_config: c.unet_config,
+            vae_scale_factor: c.vae_config.scale_factor(),
+            vae: c.vae,
+            scheduler_config: c.scheduler,
             device: device.clone(),
         })
     }
@@ -122,19 +113,12 @@ impl InpaintPrior {
 
     /// Text embeddings `[n, 77, d]` of `prompts` (`last_hidden_state`).
     pub fn encode_prompts(&self, prompts: &[&str]) -> Result<Tensor<3>, InpaintError> {
-        let mut rows = Vec::with_capacity(prompts.len());
-        for p in prompts {
-            let ids = self
-                .tokenizer
-                .encode(p)
-                .map_err(|e| InpaintError::Tokenizer(e.to_string()))?;
-            rows.push(ids.into_iter().map(i64::from).collect::<Vec<i64>>());
-        }
-        let ids: Tensor<2, Int> = self
-            .text_encoder
-            .ids_tensor(&rows, &self.device)
-            .map_err(|e| InpaintError::TextEncoder(e.to_string()))?;
-        Ok(self.text_encoder.forward(ids))
+        Ok(encode_prompts(
+            &self.tokenizer,
+            &self.text_encoder,
+            prompts,
+            &self.device,
+        )?)
     }
 }
 

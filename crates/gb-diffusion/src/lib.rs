@@ -7,6 +7,7 @@ pub mod distill;
 pub mod inpaint;
 pub mod lora;
 pub mod models;
+pub mod pipeline;
 pub mod scheduler;
 pub mod tensor_file;
 pub mod tokenizer;

@@ -15,18 +15,16 @@
 use std::path::{Path, PathBuf};
 
 use burn::module::Module;
-use burn::tensor::{Device, Tensor};
-use gb_diffusion::checkpoint::{DiffusersFolder, WeightVariant};
-use gb_diffusion::clip::{load_text_encoder, ClipTextModel};
+use burn::tensor::Device;
+use gb_diffusion::clip::{ClipPromptEncoder, ClipTextModel};
 use gb_diffusion::config::{
     AutoencoderKLConfig, ClipTextConfig, PredictionType, SchedulerConfig, UNet2DConditionConfig,
 };
 use gb_diffusion::distill::sd_adapter::{SdUnetEps, SdVaeEncoder};
-use gb_diffusion::distill::{
-    AlphasCumprod, DistillError, InpaintEpsPredictor, LatentEncoder, PromptEncoder,
-};
-use gb_diffusion::lora::{merge_pipeline_lora, LoraFile};
-use gb_diffusion::models::{load_unet, load_vae, AutoencoderKL, UNet2DConditionModel};
+use gb_diffusion::distill::{AlphasCumprod, InpaintEpsPredictor, LatentEncoder, PromptEncoder};
+use gb_diffusion::lora::LoraFile;
+use gb_diffusion::models::{AutoencoderKL, UNet2DConditionModel};
+use gb_diffusion::pipeline::{LoraCounts, SdComponents};
 use gb_diffusion::tokenizer::ClipTokenizer;
 use serde::Serialize;
 
@@ -92,32 +90,6 @@ pub struct PriorInfo {
     pub num_train_timesteps: usize,
 }
 
-/// CLIP tokenizer + text model (LoRA merged) as a prompt encoder.
-pub struct ClipEncoder {
-    tokenizer: ClipTokenizer,
-    model: ClipTextModel,
-    device: Device,
-}
-
-impl PromptEncoder for ClipEncoder {
-    fn encode_prompt(&self, prompt: &str) -> Result<Tensor<3>, DistillError> {
-        let err = |source: Box<dyn std::error::Error + Send + Sync>| DistillError::PromptEncoder {
-            prompt: prompt.to_string(),
-            source,
-        };
-        let ids = self
-            .tokenizer
-            .encode(prompt)
-            .map_err(|e| err(Box::new(e)))?;
-        let row: Vec<i64> = ids.into_iter().map(i64::from).collect();
-        let ids = self
-            .model
-            .ids_tensor(&[row], &self.device)
-            .map_err(|e| err(Box::new(e)))?;
-        Ok(self.model.forward(ids))
-    }
-}
-
 /// The loaded prior behind the distillation interfaces (so that tests may substitute mocks).
 pub struct GuidancePrior {
     /// Noise predictor (no graph).
@@ -166,53 +138,35 @@ impl GuidancePrior {
             path: lora.map(Path::to_path_buf).unwrap_or_default(),
             reason: e.to_string(),
         };
-        let folder = DiffusersFolder::open(root).map_err(|e| prior_err("model_index", &e))?;
-        let (mut unet, unet_cfg) = load_unet(root, device).map_err(|e| prior_err("unet", &e))?;
-        let (vae, vae_cfg) =
-            load_vae(root, &device.clone().autodiff()).map_err(|e| prior_err("vae", &e))?;
-        let mut text = load_text_encoder(&folder, WeightVariant::Auto, device)
-            .map_err(|e| prior_err("text_encoder", &e))?;
-        let tok_dir = folder
-            .component_dir("tokenizer")
-            .map_err(|e| prior_err("tokenizer", &e))?;
-        let tokenizer =
-            ClipTokenizer::from_dir(&tok_dir).map_err(|e| prior_err("tokenizer", &e))?;
-        let sched_path = root.join("scheduler").join("scheduler_config.json");
-        let sched = if sched_path.is_file() {
-            SchedulerConfig::from_file(&sched_path).map_err(|e| prior_err("scheduler", &e))?
-        } else {
-            SchedulerConfig::default()
-        };
-        let alphas = AlphasCumprod::from_config(&sched).map_err(|e| prior_err("scheduler", &e))?;
-
-        let (mut n_unet, mut n_text) = (0, 0);
+        let loaded = SdComponents::load(root, device, &device.clone().autodiff())
+            .map_err(|e| prior_err(e.component, &e.source))?;
+        let alphas = AlphasCumprod::from_config(&loaded.scheduler)
+            .map_err(|e| prior_err("scheduler", &e))?;
+        let (mut loaded, mut counts) = (loaded, LoraCounts::default());
         if let Some(file) = &lora_file {
-            let merged =
-                merge_pipeline_lora(unet, &unet_cfg, text, file).map_err(|e| lora_err(&e))?;
-            (unet, text) = (merged.unet, merged.text_encoder);
-            (n_unet, n_text) = (merged.unet_weights, merged.text_encoder_weights);
+            (loaded, counts) = loaded.merge_lora(file).map_err(|e| lora_err(&e))?;
             tracing::info!(
                 lora = %file.path.display(),
-                unet_weights = n_unet,
-                text_encoder_weights = n_text,
+                unet_weights = counts.unet,
+                text_encoder_weights = counts.text_encoder,
                 "LoRA attached and merged"
             );
         }
         let parts = Parts {
-            unet,
-            in_channels: unet_cfg.in_channels,
-            sample_size: unet_cfg.sample_size,
-            vae,
-            factor: vae_cfg.scale_factor(),
-            text,
-            tokenizer,
-            prediction: sched.prediction_type,
+            in_channels: loaded.unet_config.in_channels,
+            sample_size: loaded.unet_config.sample_size,
+            factor: loaded.vae_factor(),
+            prediction: loaded.scheduler.prediction_type,
+            unet: loaded.unet,
+            vae: loaded.vae,
+            text: loaded.text_encoder,
+            tokenizer: loaded.tokenizer,
             alphas,
         };
         Ok(parts.into_prior(
             root.to_path_buf(),
             lora.map(Path::to_path_buf),
-            (n_unet, n_text),
+            (counts.unet, counts.text_encoder),
             device,
         ))
     }
@@ -292,11 +246,11 @@ impl Parts {
                 self.alphas.clone(),
             )),
             encoder: Box::new(SdVaeEncoder::new(self.vae.no_grad(), self.factor)),
-            text: Box::new(ClipEncoder {
-                tokenizer: self.tokenizer,
-                model: self.text,
-                device: device.clone(),
-            }),
+            text: Box::new(ClipPromptEncoder::new(
+                self.tokenizer,
+                self.text,
+                device.clone(),
+            )),
             alphas: self.alphas,
             resolution,
         }

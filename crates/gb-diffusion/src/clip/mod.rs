@@ -8,6 +8,8 @@ pub mod attention;
 pub mod embeddings;
 pub mod encoder;
 pub mod mlp;
+pub mod prompt_encoder;
 pub mod text_model;
 
+pub use prompt_encoder::{encode_prompts, ClipPromptEncoder, PromptError};
 pub use text_model::{load_text_encoder, ClipTextModel, TextEncoderError};

@@ -1,7 +1,7 @@
 //! Adapters from the crate's Stable Diffusion modules to the distillation interfaces: the
-//! U-Net as an [`InpaintEpsPredictor`], the VAE encoder as a [`LatentEncoder`], CLIP as a
-//! [`PromptEncoder`], and [`SdPrior`], which loads all three (plus the noise schedule) from a
-//! diffusers-layout folder.
+//! U-Net as an [`InpaintEpsPredictor`], the VAE encoder as a [`LatentEncoder`], and
+//! [`SdPrior`], which loads them, CLIP's [`crate::clip::ClipPromptEncoder`] and the noise
+//! schedule through the one loader ([`crate::pipeline::SdComponents`]).
 
 use std::path::Path;
 
@@ -9,18 +9,12 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 
 use super::alphas::AlphasCumprod;
-use super::conditioning::PromptEncoder;
 use super::eps::{EpsBatch, InpaintEpsPredictor, LatentEncoder};
 use super::error::DistillError;
-use crate::checkpoint::{DiffusersFolder, WeightVariant};
-use crate::clip::{load_text_encoder, ClipTextModel};
-use crate::config::{PredictionType, SchedulerConfig};
-use crate::models::{load_unet, load_vae, AutoencoderKL, UNet2DConditionModel};
-use crate::tokenizer::ClipTokenizer;
-
-fn boxed<E: std::error::Error + Send + Sync + 'static>(e: E) -> super::error::BoxedSourceError {
-    Box::new(e)
-}
+use crate::clip::ClipPromptEncoder;
+use crate::config::PredictionType;
+use crate::models::{AutoencoderKL, UNet2DConditionModel};
+use crate::pipeline::SdComponents;
 
 /// The SD U-Net as a noise predictor. A 9-channel (inpainting) U-Net receives
 /// `[x_t, mask, masked_image_latents]`; a 4-channel one only `x_t`. A v-prediction U-Net's
@@ -121,29 +115,6 @@ impl LatentEncoder for SdVaeEncoder {
     }
 }
 
-/// CLIP tokenizer + text model as a prompt encoder (`last_hidden_state`, `[1, 77, D]`).
-pub struct ClipPromptEncoder {
-    tokenizer: ClipTokenizer,
-    model: ClipTextModel,
-    device: Device,
-}
-
-impl PromptEncoder for ClipPromptEncoder {
-    fn encode_prompt(&self, prompt: &str) -> Result<Tensor<3>, DistillError> {
-        let err = |source| DistillError::PromptEncoder {
-            prompt: prompt.to_string(),
-            source,
-        };
-        let ids = self.tokenizer.encode(prompt).map_err(|e| err(boxed(e)))?;
-        let row: Vec<i64> = ids.into_iter().map(i64::from).collect();
-        let ids = self
-            .model
-            .ids_tensor(&[row], &self.device)
-            .map_err(|e| err(boxed(e)))?;
-        Ok(self.model.forward(ids))
-    }
-}
-
 /// A Stable Diffusion prior loaded for distillation.
 pub struct SdPrior {
     /// The U-Net (no graph).
@@ -159,51 +130,27 @@ pub struct SdPrior {
 }
 
 impl SdPrior {
-    /// Loads `unet/`, `vae/`, `text_encoder/`, `tokenizer/` and `scheduler/` from a
-    /// diffusers folder; the U-Net and text encoder on `device`, the VAE on its autodiff
-    /// version.
+    /// Loads a diffusers folder ([`SdComponents::load`]): the U-Net and text encoder on
+    /// `device`, the VAE on its autodiff version.
     pub fn load(root: &Path, device: &Device) -> Result<Self, DistillError> {
-        let load = |component: &'static str| {
-            move |e: super::error::BoxedSourceError| DistillError::Load {
-                component,
+        let c = SdComponents::load(root, device, &device.clone().autodiff()).map_err(|e| {
+            DistillError::Load {
+                component: e.component,
                 path: root.to_path_buf(),
-                source: e,
+                source: e.source,
             }
-        };
-        let folder = DiffusersFolder::open(root).map_err(|e| load("model_index")(boxed(e)))?;
-        let (unet, unet_cfg) = load_unet(root, device).map_err(|e| load("unet")(boxed(e)))?;
-        let (vae, vae_cfg) =
-            load_vae(root, &device.clone().autodiff()).map_err(|e| load("vae")(boxed(e)))?;
-        let vae = vae.no_grad();
-        let model = load_text_encoder(&folder, WeightVariant::Auto, device)
-            .map_err(|e| load("text_encoder")(boxed(e)))?;
-        let tok_dir = folder
-            .component_dir("tokenizer")
-            .map_err(|e| load("tokenizer")(boxed(e)))?;
-        let tokenizer =
-            ClipTokenizer::from_dir(&tok_dir).map_err(|e| load("tokenizer")(boxed(e)))?;
-        let sched_path = root.join("scheduler").join("scheduler_config.json");
-        let sched = if sched_path.is_file() {
-            SchedulerConfig::from_file(&sched_path).map_err(|e| load("scheduler")(boxed(e)))?
-        } else {
-            SchedulerConfig::default()
-        };
-        let alphas = AlphasCumprod::from_config(&sched)?;
-        let factor = vae_cfg.scale_factor();
-        let resolution = unet_cfg.sample_size.unwrap_or(64) * factor;
+        })?;
+        let alphas = AlphasCumprod::from_config(&c.scheduler)?;
+        let (factor, resolution) = (c.vae_factor(), c.resolution());
         Ok(Self {
             unet: SdUnetEps::new(
-                unet,
-                unet_cfg.in_channels,
-                sched.prediction_type,
+                c.unet,
+                c.unet_config.in_channels,
+                c.scheduler.prediction_type,
                 alphas.clone(),
             ),
-            encoder: SdVaeEncoder::new(vae, factor),
-            text: ClipPromptEncoder {
-                tokenizer,
-                model,
-                device: device.clone(),
-            },
+            encoder: SdVaeEncoder::new(c.vae.no_grad(), factor),
+            text: ClipPromptEncoder::new(c.tokenizer, c.text_encoder, device.clone()),
             alphas,
             resolution,
         })

@@ -6,12 +6,13 @@ use std::path::{Path, PathBuf};
 use burn::module::Module;
 use burn::tensor::{Device, Int, Tensor};
 
-use gb_diffusion::checkpoint::{keymap, save_module, DiffusersFolder, WeightVariant};
-use gb_diffusion::clip::text_model::{load_text_encoder, ClipTextModel};
+use gb_diffusion::checkpoint::{keymap, save_module};
+use gb_diffusion::clip::text_model::ClipTextModel;
 use gb_diffusion::config::{
     AutoencoderKLConfig, ClipTextConfig, SchedulerConfig, UNet2DConditionConfig,
 };
-use gb_diffusion::models::{load_unet, load_vae, AutoencoderKL, UNet2DConditionModel};
+use gb_diffusion::models::{AutoencoderKL, UNet2DConditionModel};
+use gb_diffusion::pipeline::SdComponents;
 use gb_diffusion::scheduler::betas;
 use gb_diffusion::tokenizer::ClipTokenizer;
 
@@ -81,30 +82,21 @@ impl PriorModels {
     /// Loads tokenizer, text encoder, U-Net, VAE and scheduler of a diffusers inpainting
     /// folder onto `device` (use an autodiff device to train).
     pub fn load(root: &Path, device: &Device) -> Result<Self, FinetuneError> {
-        let folder = DiffusersFolder::open(root)
-            .map_err(|e| diffusion("prior folder", root)(e.to_string()))?;
-        let tok_dir = folder
-            .component_dir("tokenizer")
-            .map_err(|e| diffusion("tokenizer", root)(e.to_string()))?;
-        let tokenizer = ClipTokenizer::from_dir(&tok_dir)
-            .map_err(|e| diffusion("tokenizer", &tok_dir)(e.to_string()))?;
-        let text_encoder = load_text_encoder(&folder, WeightVariant::Auto, device)
-            .map_err(|e| diffusion("text encoder", root)(e.to_string()))?;
-        let (unet, unet_config) =
-            load_unet(root, device).map_err(|e| diffusion("unet", root)(e.to_string()))?;
-        if unet_config.in_channels != 9 {
+        let c = SdComponents::load(root, device, device)
+            .map_err(|e| diffusion(e.component, root)(e.source.to_string()))?;
+        if c.unet_config.in_channels != 9 {
             return Err(FinetuneError::Invalid {
                 path: root.join("unet").join("config.json"),
                 message: format!(
                     "in_channels = {}; fine-tuning needs an inpainting U-Net with 9 \
                      (noisy latent 4 + mask 1 + masked-image latent 4)",
-                    unet_config.in_channels
+                    c.unet_config.in_channels
                 ),
             });
         }
-        let (vae, vae_config) =
-            load_vae(root, device).map_err(|e| diffusion("vae", root)(e.to_string()))?;
-        let scheduler = scheduler_of(root)?;
+        let (tokenizer, unet, text_encoder, unet_config) =
+            (c.tokenizer, c.unet, c.text_encoder, c.unet_config);
+        let (vae, vae_config, scheduler) = (c.vae, c.vae_config, c.scheduler);
         Ok(Self {
             tokenizer,
             trainable: Trainable { unet, text_encoder },
