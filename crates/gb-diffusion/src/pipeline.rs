@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use burn::tensor::Device;
 
 use crate::checkpoint::{DiffusersFolder, WeightVariant};
-use crate::clip::{load_text_encoder, ClipPromptEncoder, ClipTextModel};
+use crate::clip::{load_text_encoder, ClipTextModel};
 use crate::config::{AutoencoderKLConfig, SchedulerConfig, UNet2DConditionConfig};
 use crate::lora::{merge_pipeline_lora, LoraError, LoraFile};
 use crate::models::{load_unet, load_vae, AutoencoderKL, UNet2DConditionModel};
@@ -119,13 +119,4 @@ impl SdComponents {
     pub fn resolution(&self) -> usize {
         self.unet_config.sample_size.unwrap_or(64) * self.vae_factor()
     }
-}
-
-/// The prompt encoder of `tokenizer` and `text_encoder` on `device`.
-pub fn prompt_encoder(
-    tokenizer: ClipTokenizer,
-    text_encoder: ClipTextModel,
-    device: &Device,
-) -> ClipPromptEncoder {
-    ClipPromptEncoder::new(tokenizer, text_encoder, device.clone())
 }

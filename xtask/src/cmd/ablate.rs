@@ -107,19 +107,32 @@ pub struct Args {
     pub merge: bool,
 }
 
+impl GridArgs {
+    /// The grid's shared settings on `scene` with training seed `seed` (no LoRA override, the
+    /// default metric weights, no orbit).
+    pub fn settings(&self, scene: PathBuf, seed: Option<u64>) -> GridSettings {
+        GridSettings {
+            scene,
+            preset: self.preset.clone(),
+            prior: self.prior.clone().unwrap_or_else(|| "tiny".into()),
+            lora: None,
+            steps: self.steps,
+            seed,
+            device: self.device.unwrap_or_default().name().into(),
+            weights: None,
+            orbit_frames: 0,
+        }
+    }
+}
+
 /// Plans the grid of `scene` into `out`: the settings of `grid`, the training seed, LoRA,
 /// weights, orbit frames and w3 sweep.
 pub fn plan(args: &Args, scene: PathBuf) -> anyhow::Result<Grid> {
     let settings = GridSettings {
-        scene,
-        preset: args.grid.preset.clone(),
-        prior: args.grid.prior.clone().unwrap_or_else(|| "tiny".into()),
         lora: args.lora.clone(),
-        steps: args.grid.steps,
-        seed: args.seed,
-        device: args.grid.device.unwrap_or_default().name().into(),
         weights: args.weights.clone(),
         orbit_frames: args.orbit_frames,
+        ..args.grid.settings(scene, args.seed)
     };
     let grid = Grid::plan(
         settings,

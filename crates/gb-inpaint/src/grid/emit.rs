@@ -43,7 +43,8 @@ impl std::str::FromStr for Engine {
 /// Settings of the emitted jobs.
 #[derive(Debug, Clone)]
 pub struct EmitOptions {
-    /// The command that runs a cell (default: this executable).
+    /// The command that runs a cell (default: this executable's path; `gb-nerf`, found on
+    /// the job's `PATH`, when the path cannot be read).
     pub command: String,
     /// The container image of the Kubernetes job.
     pub image: String,
@@ -69,11 +70,15 @@ impl Default for EmitOptions {
 /// A name Kubernetes accepts (lowercase alphanumerics and `-`, at most 52 characters so
 /// that pod names with their index suffix stay under 63).
 fn k8s_name(grid_dir: &Path) -> String {
-    let stem = grid_dir
-        .file_name()
-        .map(|s| s.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    let mut name: String = format!("gb-nerf-grid-{stem}")
+    // a folder without a last component (`/`, `..`) leaves the bare prefix
+    let full = match grid_dir.file_name() {
+        Some(stem) => format!(
+            "gb-nerf-grid-{}",
+            stem.to_string_lossy().to_ascii_lowercase()
+        ),
+        None => "gb-nerf-grid".to_string(),
+    };
+    let mut name: String = full
         .chars()
         .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
         .collect();
@@ -221,6 +226,7 @@ mod tests {
             k8s_name(Path::new("/x/My_Grid.v2")),
             "gb-nerf-grid-my-grid-v2"
         );
+        assert_eq!(k8s_name(Path::new("/")), "gb-nerf-grid");
         let long = k8s_name(Path::new(&"a".repeat(200)));
         assert!(long.len() <= 52 && !long.ends_with('-'), "{long}");
     }

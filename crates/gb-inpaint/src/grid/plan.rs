@@ -2,6 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
+use gb_diffusion::checkpoint::PriorSpec;
+
 use super::{Grid, GridCell, GridSettings, SweepPoint};
 use crate::ablate::{ABLATION_ROWS, BASELINE_ROWS, DEFAULT_W3};
 use crate::error::InpaintError;
@@ -37,14 +39,24 @@ fn absolute(p: &Path) -> Result<PathBuf, InpaintError> {
     std::path::absolute(p).map_err(|e| InpaintError::io(p, e))
 }
 
-/// An existing path made absolute; anything else (a name, a hub id) as given.
-fn absolute_if_path(spec: &str) -> Result<String, InpaintError> {
-    let p = Path::new(spec);
-    Ok(if p.exists() {
-        absolute(p)?.display().to_string()
+/// A method or preset spec with its `.toml` file made absolute (the rule of
+/// `MethodConfig::load` and `NerfConfig::preset`: only a `.toml` spec is a file); a
+/// built-in name as given.
+fn absolute_toml(spec: &str) -> Result<String, InpaintError> {
+    if spec.ends_with(".toml") {
+        Ok(absolute(Path::new(spec))?.display().to_string())
     } else {
-        spec.to_string()
-    })
+        Ok(spec.to_string())
+    }
+}
+
+/// A prior spec with its folder made absolute (`PriorSpec::parse` decides what is a
+/// folder); `tiny` and hub ids as given. A spec that names nothing is left for the check.
+fn absolute_prior(spec: &str) -> Result<String, InpaintError> {
+    match PriorSpec::parse(spec) {
+        Ok(PriorSpec::Folder(dir)) => Ok(absolute(&dir)?.display().to_string()),
+        _ => Ok(spec.to_string()),
+    }
 }
 
 impl Grid {
@@ -66,8 +78,8 @@ impl Grid {
             });
         }
         settings.scene = absolute(&settings.scene)?;
-        settings.preset = absolute_if_path(&settings.preset)?;
-        settings.prior = absolute_if_path(&settings.prior)?;
+        settings.preset = absolute_toml(&settings.preset)?;
+        settings.prior = absolute_prior(&settings.prior)?;
         settings.lora = settings.lora.as_deref().map(absolute).transpose()?;
         settings.weights = settings.weights.as_deref().map(absolute).transpose()?;
         let names = grid_methods(methods);
@@ -79,7 +91,7 @@ impl Grid {
         }
         let mut configs = Vec::new();
         for name in &names {
-            let spec = absolute_if_path(name)?;
+            let spec = absolute_toml(name)?;
             let m = MethodConfig::load(&spec).map_err(|e| InpaintError::Spec {
                 field: format!("--methods: {name}"),
                 reason: e.to_string(),
@@ -171,6 +183,18 @@ fn check_priors(settings: &GridSettings, methods: &[&MethodConfig]) -> Result<()
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_toml_specs_and_prior_folders_become_absolute_paths() {
+        assert_eq!(absolute_toml("fast").unwrap(), "fast");
+        let file = absolute_toml("my-method.toml").unwrap();
+        assert!(Path::new(&file).is_absolute() && file.ends_with("my-method.toml"), "{file}");
+        assert_eq!(absolute_prior("tiny").unwrap(), "tiny");
+        assert_eq!(absolute_prior("owner/model").unwrap(), "owner/model");
+        let dir = tempfile::tempdir().unwrap();
+        let prior = absolute_prior(&dir.path().display().to_string()).unwrap();
+        assert_eq!(Path::new(&prior), dir.path());
+    }
 
     #[test]
     fn methods_keep_the_table_order_with_none_first() {

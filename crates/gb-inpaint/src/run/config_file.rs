@@ -3,6 +3,8 @@
 
 use std::path::Path;
 
+use gb_diffusion::checkpoint::PriorSpec;
+
 use super::RunSpec;
 use crate::error::InpaintError;
 use crate::method::{MethodConfig, Prompts};
@@ -49,8 +51,8 @@ fn toml_err(path: &Path, e: impl std::error::Error + Send + Sync + 'static) -> I
 /// The `--prior` of the reproducing command: the spec as given for the built-in prior and
 /// hub ids (they do not depend on where the clone or cache lies), the folder otherwise.
 fn prior_arg(spec: Option<&str>, prior: &PriorInfo) -> String {
-    match spec {
-        Some(s) if !Path::new(s).exists() => s.to_string(),
+    match spec.map(|s| (s, PriorSpec::parse(s))) {
+        Some((s, Ok(PriorSpec::Tiny | PriorSpec::Hub(_)))) => s.to_string(),
         _ => prior.folder.display().to_string(),
     }
 }

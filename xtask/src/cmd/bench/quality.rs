@@ -2,7 +2,7 @@
 //! scenes with ground truth, written to `bench/results/quality-<scene>-<timestamp>.json`.
 //!
 //! For each scene of `--scenes` (default `stairs,fence`, generated with seed 0) it runs
-//! `cargo xtask ablate` (same code, this process) on `--methods` (default: the baselines
+//! the method grid of `cargo xtask ablate` (`gb_inpaint::grid`, in this process) on `--methods` (default: the baselines
 //! table, none first, plus the ablation rows) without the w3 sweep, into `--work/<scene>/`,
 //! and records the baseline and ablation tables with the machine. The reference is the
 //! `none` run of the same job: `vs_none` gives, for each method and each column, whether it
@@ -18,6 +18,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use gb_inpaint::grid::{self, Grid};
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
 use serde_json::{json, Value};
 
@@ -177,22 +178,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 Some(s) => args.work.join(name.to_string()).join(format!("seed-{s}")),
                 None => args.work.join(name.to_string()),
             };
-            let outcome = crate::cmd::ablate::run(crate::cmd::ablate::Args {
-                scene: Some(scene_dir.clone()),
-                grid: args.grid.clone(),
-                lora: None,
-                seed: *seed,
-                out: runs.clone(),
-                w3: Some(Vec::new()),
-                weights: None,
-                orbit_frames: 0,
-                emit: None,
-                image: String::new(),
-                cpus: 1,
-                gpus: 0,
-                grid_dir: None,
-                cell: None,
-                merge: false,
+            // the method grid without the w3 sweep, run in this process
+            let outcome = Grid::plan(
+                args.grid.settings(scene_dir.clone(), *seed),
+                args.grid.methods.as_deref(),
+                Some(&[]),
+                &runs,
+            )
+            .and_then(|g| g.write(&runs))
+            .and_then(|_| grid::run_all(&runs))
+            .map_err(anyhow::Error::from)
+            .and_then(|merged| {
+                let failed: Vec<String> = merged
+                    .failed
+                    .iter()
+                    .map(|(d, e)| format!("{d}: {e}"))
+                    .collect();
+                if failed.is_empty() {
+                    Ok(())
+                } else {
+                    Err(anyhow::anyhow!("run(s) failed: {}", failed.join("; ")))
+                }
             });
             if let Err(e) = &outcome {
                 errors.push(format!("seed {seed:?}: {e:#}"));
