@@ -14,3 +14,10 @@ pub mod stlpips;
 
 pub use error::MetricError;
 pub use image_metrics::{psnr, ssim, Region};
+
+/// The metric weights folder used when none is given: `$GB_TEST_DATA/weights` when it
+/// exists. A relative `GB_TEST_DATA` is taken against the current folder.
+pub fn default_weights_dir() -> Option<std::path::PathBuf> {
+    let dir = std::path::PathBuf::from(std::env::var_os("GB_TEST_DATA")?).join("weights");
+    dir.is_dir().then_some(dir)
+}

@@ -104,12 +104,8 @@ pub struct MetricOptions {
 impl MetricOptions {
     /// `weights`, or `$GB_TEST_DATA/weights` when it exists.
     pub fn new(weights: Option<PathBuf>, device: BackendKind) -> Self {
-        let weights = weights.or_else(|| {
-            let dir = PathBuf::from(std::env::var_os("GB_TEST_DATA")?).join("weights");
-            dir.is_dir().then_some(dir)
-        });
         Self {
-            weights,
+            weights: weights.or_else(gb_eval::default_weights_dir),
             device,
             fid_min_images: FID_MIN_IMAGES,
         }

@@ -296,7 +296,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         depth_kind,
     )?;
     let requested = requested_metrics(args.metrics.as_deref(), depth_dirs.is_some())?;
-    let weights = args.weights.clone().or_else(default_weights_dir);
+    let weights = args.weights.clone().or_else(gb_eval::default_weights_dir);
     let ctx = Ctx {
         inputs,
         weights,
@@ -367,11 +367,6 @@ fn requested_metrics(list: Option<&[String]>, have_depth: bool) -> anyhow::Resul
             .map(|m| m.name.to_string())
             .collect()),
     }
-}
-
-fn default_weights_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(std::env::var_os("GB_TEST_DATA")?).join("weights");
-    dir.is_dir().then_some(dir)
 }
 
 /// Per-image values of one metric over the regions it supports; errors per region.

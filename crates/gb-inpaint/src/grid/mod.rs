@@ -46,7 +46,8 @@ pub struct GridSettings {
     pub seed: Option<u64>,
     /// The backend's name.
     pub device: String,
-    /// Folder of metric weights.
+    /// Folder of metric weights (the plan's default: `$GB_TEST_DATA/weights` when it
+    /// exists, made absolute).
     pub weights: Option<PathBuf>,
     /// Frames of each run's orbit animation.
     pub orbit_frames: usize,

@@ -81,7 +81,14 @@ impl Grid {
         settings.preset = absolute_toml(&settings.preset)?;
         settings.prior = absolute_prior(&settings.prior)?;
         settings.lora = settings.lora.as_deref().map(absolute).transpose()?;
-        settings.weights = settings.weights.as_deref().map(absolute).transpose()?;
+        // the weights are resolved once, here: every cell scores with the same metrics,
+        // whatever folder or machine it runs on
+        settings.weights = settings
+            .weights
+            .or_else(gb_eval::default_weights_dir)
+            .as_deref()
+            .map(absolute)
+            .transpose()?;
         let names = grid_methods(methods);
         if names.is_empty() {
             return Err(InpaintError::Spec {
@@ -188,7 +195,10 @@ mod tests {
     fn only_toml_specs_and_prior_folders_become_absolute_paths() {
         assert_eq!(absolute_toml("fast").unwrap(), "fast");
         let file = absolute_toml("my-method.toml").unwrap();
-        assert!(Path::new(&file).is_absolute() && file.ends_with("my-method.toml"), "{file}");
+        assert!(
+            Path::new(&file).is_absolute() && file.ends_with("my-method.toml"),
+            "{file}"
+        );
         assert_eq!(absolute_prior("tiny").unwrap(), "tiny");
         assert_eq!(absolute_prior("owner/model").unwrap(), "owner/model");
         let dir = tempfile::tempdir().unwrap();
