@@ -24,7 +24,11 @@ fn files(dir: &Path, out: &mut Vec<PathBuf>) {
 }
 
 fn main() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
+    // read at run time, not with env!(): cargo reuses a compiled build script for the same
+    // package in another clone sharing the target folder, and a compiled-in path would then
+    // name the clone it was first built in
+    let manifest = std::env::var_os("CARGO_MANIFEST_DIR").expect("CARGO_MANIFEST_DIR");
+    let root = Path::new(&manifest).join("../assets");
     let root = root
         .canonicalize()
         .expect("the repository's assets/ folder");

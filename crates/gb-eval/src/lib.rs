@@ -11,6 +11,7 @@ pub mod lpips;
 pub mod nima;
 pub mod report;
 pub mod stlpips;
+pub mod suite;
 
 pub use error::MetricError;
 pub use image_metrics::{psnr, ssim, Region};

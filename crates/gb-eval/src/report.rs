@@ -24,9 +24,9 @@
 //! does not report), with arrows for the better direction; `n/a` marks an unavailable metric,
 //! whose reason follows the table; `-` a metric that was not run.
 //!
-//! # Adding a metric (eval-b: FID, D-FID, BRISQUE, NIMA)
+//! # Adding a metric
 //! The columns are already in [`COLUMNS`]; a metric only has to put its values into an
-//! [`EvalReport`] under its keys (see `xtask/src/cmd/eval.rs` for the dispatch table).
+//! [`EvalReport`] under its keys (see [`crate::suite`] for the metric table).
 
 use std::collections::BTreeMap;
 
@@ -171,6 +171,17 @@ impl EvalReport {
             map.insert(key.to_string(), *v);
         }
         self.set(key, mean(values));
+    }
+
+    /// Records the per-image values of `key` that exist (one entry per image, in pairing
+    /// order; `None` leaves that image without the key). The set-level value is the
+    /// caller's.
+    pub fn set_per_image_partial(&mut self, key: &str, values: &[Option<f64>]) {
+        for ((_, map), v) in self.per_image.iter_mut().zip(values) {
+            if let Some(v) = v {
+                map.insert(key.to_string(), *v);
+            }
+        }
     }
 
     /// The JSON document (see the module docs).

@@ -114,6 +114,9 @@ pub enum InpaintError {
     /// A metric could not be computed.
     #[error("metric: {0}")]
     Metric(#[from] gb_eval::MetricError),
+    /// The metric suite could not read its inputs.
+    #[error("evaluation: {0}")]
+    Evaluation(#[from] gb_eval::suite::SuiteError),
     /// The NeRF side failed (config, scene contents, checkpoint).
     #[error(transparent)]
     Nerf(#[from] NerfError),

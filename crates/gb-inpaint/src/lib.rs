@@ -17,7 +17,6 @@
 //! - [`resume`]: what a checkpoint keeps for an exact resume besides the reconstruction
 //!   (run identity, counters, visibility maps);
 //! - [`pre_inpainted`]: the SPIn-NeRF + LaMa baseline's inputs;
-//! - [`metrics`]: every `gb_eval` metric that applies to a run's test views;
 //! - [`report`], [`svg`], [`gif`]: the run's `report.html`, its SVG charts (a small writer of
 //!   our own rather than a plotting crate, see [`svg`]) and the orbit animation;
 //! - [`visibility`]: visibility-aware guidance (the prior acts only where no training view
@@ -40,7 +39,6 @@ pub mod gif;
 pub mod grid;
 pub mod guidance;
 pub mod method;
-pub mod metrics;
 pub mod pre_inpainted;
 pub mod prior;
 pub mod report;

@@ -20,9 +20,9 @@ use gb_nerf::train::data::prepare_view;
 use gb_nerf::train::output::write_render_pngs;
 
 use crate::error::InpaintError;
-use crate::metrics::{RenderOnly, ViewPair};
 use crate::svg::{escape, LineChart, Series};
 use crate::GuidedTrainer;
+use gb_eval::suite::EvalPair;
 
 /// One image of a view's row.
 #[derive(Debug, Clone, PartialEq)]
@@ -342,7 +342,7 @@ pub struct RunPage<'a> {
     /// The trained field.
     pub trainer: &'a GuidedTrainer,
     /// The evaluated test views (renders already in `OUT/renders/`).
-    pub pairs: &'a [ViewPair],
+    pub pairs: &'a [EvalPair],
     /// For a scene without test views: its rendered masked training views
     /// ([`render_masked_train_views`]), shown instead.
     pub train_views: &'a [TrainViewRender],
@@ -366,8 +366,9 @@ pub struct TrainViewRender {
     pub view: String,
     /// The captured image (object present).
     pub input: RgbImage,
-    /// The render, named `train_<view>` (its PNGs are `OUT/renders/train_<view>_*.png`).
-    pub render: RenderOnly,
+    /// The render, named `train_<view>` (its PNGs are `OUT/renders/train_<view>_*.png`),
+    /// without a ground truth.
+    pub render: EvalPair,
 }
 
 /// Renders the first [`MAX_TRAIN_VIEWS_SHOWN`] masked training views into `OUT/renders/`
@@ -391,10 +392,12 @@ pub fn render_masked_train_views(
         views.push(TrainViewRender {
             view: view.name.clone(),
             input: v.image,
-            render: RenderOnly {
+            render: EvalPair {
                 name: stem,
                 pred: r.rgb,
+                gt: None,
                 mask: v.mask.map(|m| m.data),
+                disparity: None,
             },
         });
     }
@@ -470,14 +473,15 @@ pub fn write_run_report(p: &RunPage) -> Result<PathBuf, InpaintError> {
     };
     for pair in p.pairs {
         let n = &pair.name;
+        let Some(gt_image) = &pair.gt else { continue };
         let gt = format!("{n}_gt.png");
-        write_png(&dir.join(&gt), &pair.gt)?;
+        write_png(&dir.join(&gt), gt_image)?;
         let diff = format!("{n}_diff.png");
-        write_png(&dir.join(&diff), &abs_diff(&pair.pred, &pair.gt)?)?;
+        write_png(&dir.join(&diff), &abs_diff(&pair.pred, gt_image)?)?;
         let mut cells = vec![
             c("ground truth", format!("report/{gt}")),
             c("ours", format!("renders/{n}_rgb.png")),
-            baseline_cell(n, n, &pair.gt, pair.mask.as_deref())?,
+            baseline_cell(n, n, gt_image, pair.mask.as_deref())?,
             c("|ours − ground truth|", format!("report/{diff}")),
             c("ours: depth", format!("renders/{n}_depth.png")),
         ];

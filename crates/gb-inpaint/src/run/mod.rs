@@ -19,6 +19,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use gb_core::BackendKind;
+use gb_eval::suite::{evaluate, PairSet, SuiteOptions};
 
 pub use config_file::shell_quote;
 pub use setup::{load_method, load_preset, method_and_prior};
@@ -27,7 +28,6 @@ pub use test_views::disparity_map;
 
 use crate::error::InpaintError;
 use crate::method::{PromptOverrides, SceneCaptions};
-use crate::metrics::{evaluate, evaluate_without_reference, MetricOptions};
 use crate::prior::{lora_for, GuidancePrior};
 use crate::report::RunPage;
 use crate::trainer::{FitOptions, GuidedTrainer};
@@ -202,22 +202,28 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     })?;
 
     let render_start = Instant::now();
-    let (views, pairs) = test_views::render_test_views(&out.join("renders"), &scene, &trainer)?;
+    let tested = test_views::render_test_views(&out.join("renders"), &scene, &trainer)?;
     // a scene without test views: its masked training views, scored without a reference
-    let train_views = if pairs.is_empty() {
+    let train_views = if tested.pairs.is_empty() {
         crate::report::render_masked_train_views(out, &scene, &trainer)?
     } else {
         Vec::new()
     };
     let render_seconds = render_start.elapsed().as_secs_f64();
     let eval_start = Instant::now();
-    let metric_options = MetricOptions::new(spec.weights.clone(), device);
-    let eval = if pairs.is_empty() {
-        let renders: Vec<_> = train_views.iter().map(|t| t.render.clone()).collect();
-        evaluate_without_reference(&renders, &metric_options)
-    } else {
-        evaluate(&pairs, &metric_options)
+    let renders: Vec<_> = train_views.iter().map(|t| t.render.clone()).collect();
+    let scored = PairSet {
+        noun: "test view",
+        no_reference: "the scene has no test view with ground truth",
+        no_depth: "the scene has no ground-truth depth",
+        ..PairSet::new(if tested.pairs.is_empty() {
+            &renders
+        } else {
+            &tested.pairs
+        })
     };
+    let eval = evaluate(&scored, &SuiteOptions::new(spec.weights.clone(), device))?;
+    let views = tested.metrics(&eval);
     let eval_seconds = eval_start.elapsed().as_secs_f64();
     let orbit = crate::gif::write_orbit(out, &scene, &trainer, spec.orbit_frames)?;
     let mut export =
@@ -272,7 +278,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         out,
         scene: &scene,
         trainer: &trainer,
-        pairs: &pairs,
+        pairs: &tested.pairs,
         train_views: &train_views,
         eval: &eval,
         metrics: &metrics_json,

@@ -1,0 +1,88 @@
+//! Which LPIPS network the suite's `lpips` uses, loaded once per evaluation.
+
+use std::path::Path;
+
+use gb_core::{BackendKind, RgbImage};
+
+use crate::error::MetricError;
+use crate::image_metrics::Region;
+use crate::lpips::{Backbone, Lpips};
+use crate::stlpips::StLpips;
+
+/// The LPIPS network.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum LpipsNet {
+    /// Shift-tolerant LPIPS, AlexNet (weights `stlpips_alex_shift_tolerant.safetensors`).
+    #[default]
+    StAlex,
+    /// Standard LPIPS, AlexNet (user weights `lpips_alex.safetensors`).
+    Alex,
+    /// Standard LPIPS, VGG16 (user weights `lpips_vgg.safetensors`).
+    Vgg,
+}
+
+impl LpipsNet {
+    /// The name written in the report's context.
+    pub fn name(self) -> &'static str {
+        match self {
+            LpipsNet::StAlex => "st-lpips-alex",
+            LpipsNet::Alex => "lpips-alex",
+            LpipsNet::Vgg => "lpips-vgg",
+        }
+    }
+
+    /// Its weights file in the weights folder.
+    pub fn weights_file(self) -> &'static str {
+        match self {
+            LpipsNet::StAlex => StLpips::WEIGHTS_FILE,
+            LpipsNet::Alex => "lpips_alex.safetensors",
+            LpipsNet::Vgg => "lpips_vgg.safetensors",
+        }
+    }
+}
+
+/// A loaded LPIPS network of either kind. One instance lives for a whole evaluation, so the
+/// size difference between the variants costs nothing worth a box.
+#[allow(clippy::large_enum_variant)]
+pub enum LpipsModel {
+    /// Shift-tolerant.
+    Shift(StLpips),
+    /// Standard.
+    Standard(Lpips),
+}
+
+impl LpipsModel {
+    /// Loads `net` from `path`.
+    pub fn load(net: LpipsNet, path: &Path, device: BackendKind) -> Result<Self, MetricError> {
+        let device = device.device();
+        Ok(match net {
+            LpipsNet::StAlex => LpipsModel::Shift(StLpips::load(path, &device)?),
+            LpipsNet::Alex => LpipsModel::Standard(Lpips::load(path, Backbone::Alex, &device)?),
+            LpipsNet::Vgg => LpipsModel::Standard(Lpips::load(path, Backbone::Vgg, &device)?),
+        })
+    }
+
+    /// The distance over the whole image or a box (a per-pixel mask does not apply to a
+    /// network distance).
+    pub fn distance(
+        &self,
+        p: &RgbImage,
+        g: &RgbImage,
+        region: &Region,
+    ) -> Result<f64, MetricError> {
+        match (self, region) {
+            (LpipsModel::Shift(m), Region::Full) => m.distance(p, g),
+            (LpipsModel::Standard(m), Region::Full) => m.distance(p, g),
+            (LpipsModel::Shift(m), Region::BBox { x0, y0, x1, y1 }) => {
+                m.distance_bbox(p, g, (*x0, *y0, *x1, *y1))
+            }
+            (LpipsModel::Standard(m), Region::BBox { x0, y0, x1, y1 }) => {
+                m.distance_bbox(p, g, (*x0, *y0, *x1, *y1))
+            }
+            (_, Region::Mask(_)) => Err(MetricError::InvalidInput {
+                what: "LPIPS",
+                reason: "has no per-pixel mask variant".into(),
+            }),
+        }
+    }
+}
