@@ -28,10 +28,11 @@
 //! w2 = 0.5
 //! ```
 //!
-//! SDS takes `guidance_scale` (diffusers' convention), CSD `w1`, `w2` and optionally `w3`
-//! (default `w2 - w1`, the original CSD), BSD `w1` and `w2`. Each guidance table also takes
-//! gb-diffusion's `timesteps` (`t_min`, `t_max`, `schedule`), `weighting`
-//! (`one_minus_alpha_bar` | `constant`) and `grad_clamp`.
+//! Each guidance table is gb-diffusion's `DistillSettings` in its flat form
+//! (`gb_diffusion::distill::settings_table`): SDS takes `guidance_scale` (diffusers'
+//! convention), CSD `w1`, `w2` and optionally `w3` (default `w2 - w1`, the original CSD),
+//! BSD `w1` and `w2`; each also takes `timesteps` (`t_min`, `t_max`, `schedule`),
+//! `weighting` (`one_minus_alpha_bar` | `constant`) and `grad_clamp`.
 //!
 //! # The scale of lambda (how our gradient maps to the paper's 1e-4)
 //!
@@ -66,9 +67,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use gb_diffusion::distill::{
-    DistillSettings, GuidanceMethod, PriorInputMode, TimestepConfig, Weighting,
-};
+use gb_diffusion::distill::{DistillSettings, PriorInputMode};
 use serde::{Deserialize, Serialize};
 
 use crate::error::InpaintError;
@@ -104,141 +103,6 @@ pub const BUILTIN_METHODS: &[(&str, &str)] = &[
         include_str!("../../../configs/methods/pre-inpainted.toml"),
     ),
 ];
-
-/// Which score-distillation formula a modality uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum GuidanceKind {
-    /// No guidance on this modality.
-    None,
-    /// Score Distillation Sampling.
-    Sds,
-    /// Classifier Score Distillation.
-    Csd,
-    /// Balanced Score Distillation.
-    Bsd,
-}
-
-/// The guidance of one modality (RGB renders or normal maps).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct GuidanceConfig {
-    /// The formula.
-    pub method: GuidanceKind,
-    /// SDS: classifier-free guidance scale.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub guidance_scale: Option<f32>,
-    /// CSD / BSD: weight of `eps(y)`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub w1: Option<f32>,
-    /// CSD / BSD: weight of `eps(y_neg)` (subtracted).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub w2: Option<f32>,
-    /// CSD: weight of `eps(null)` (default `w2 - w1`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub w3: Option<f32>,
-    /// Timestep range and schedule (paper: uniform in [0.02, 0.98]).
-    #[serde(default)]
-    pub timesteps: TimestepConfig,
-    /// `w(t)` (reference: `1 - alpha_bar`).
-    #[serde(default)]
-    pub weighting: Weighting,
-    /// Optional clamp of the latent gradient.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub grad_clamp: Option<f32>,
-}
-
-impl Default for GuidanceConfig {
-    fn default() -> Self {
-        Self::none()
-    }
-}
-
-impl GuidanceConfig {
-    /// No guidance.
-    pub fn none() -> Self {
-        Self {
-            method: GuidanceKind::None,
-            guidance_scale: None,
-            w1: None,
-            w2: None,
-            w3: None,
-            timesteps: TimestepConfig::default(),
-            weighting: Weighting::default(),
-            grad_clamp: None,
-        }
-    }
-
-    /// True unless the method is `none`.
-    pub fn is_active(&self) -> bool {
-        self.method != GuidanceKind::None
-    }
-
-    /// The distillation settings (`None` for `method = "none"`); `table` names the TOML
-    /// table (`rgb` / `normal`) in errors.
-    pub fn settings(&self, table: &str) -> Result<Option<DistillSettings>, String> {
-        let need = |name: &str, v: Option<f32>| {
-            v.ok_or_else(|| format!("[{table}] method = {:?} needs `{name}`", self.method))
-        };
-        let unused = |name: &str, v: Option<f32>| {
-            if v.is_some() {
-                Err(format!(
-                    "[{table}] `{name}` does not apply to method = {:?}",
-                    self.method
-                ))
-            } else {
-                Ok(())
-            }
-        };
-        let guidance = match self.method {
-            GuidanceKind::None => return Ok(None),
-            GuidanceKind::Sds => {
-                unused("w1", self.w1)?;
-                unused("w2", self.w2)?;
-                unused("w3", self.w3)?;
-                GuidanceMethod::Sds {
-                    guidance_scale: need("guidance_scale", self.guidance_scale)?,
-                }
-            }
-            GuidanceKind::Csd => {
-                unused("guidance_scale", self.guidance_scale)?;
-                GuidanceMethod::Csd {
-                    w1: need("w1", self.w1)?,
-                    w2: need("w2", self.w2)?,
-                    w3: self.w3,
-                }
-            }
-            GuidanceKind::Bsd => {
-                unused("guidance_scale", self.guidance_scale)?;
-                unused("w3", self.w3)?;
-                GuidanceMethod::Bsd {
-                    w1: need("w1", self.w1)?,
-                    w2: need("w2", self.w2)?,
-                }
-            }
-        };
-        let settings = DistillSettings {
-            guidance,
-            timesteps: self.timesteps,
-            weighting: self.weighting,
-            grad_clamp: self.grad_clamp,
-        };
-        settings
-            .timesteps
-            .validate()
-            .map_err(|e| format!("[{table}] {e}"))?;
-        settings
-            .guidance
-            .build()
-            .map_err(|e| format!("[{table}] {e}"))?;
-        if let Some(c) = settings.grad_clamp {
-            if !(c.is_finite() && c > 0.0) {
-                return Err(format!("[{table}] grad_clamp = {c} must be > 0"));
-            }
-        }
-        Ok(Some(settings))
-    }
-}
 
 /// Prompt templates; `{caption}` and `{object_caption}` are replaced by the scene's captions
 /// (a procedural scene's `scene.json`: `caption_without_object`, `caption_with_object`), or by
@@ -405,12 +269,12 @@ pub struct MethodConfig {
     /// Prompt templates.
     #[serde(default)]
     pub prompts: PromptTemplates,
-    /// RGB guidance.
-    #[serde(default)]
-    pub rgb: GuidanceConfig,
+    /// RGB guidance (`None`: `method = "none"`, or no `[rgb]` table).
+    #[serde(default, with = "gb_diffusion::distill::settings_table::optional")]
+    pub rgb: Option<DistillSettings>,
     /// Normal-map guidance.
-    #[serde(default)]
-    pub normal: GuidanceConfig,
+    #[serde(default, with = "gb_diffusion::distill::settings_table::optional")]
+    pub normal: Option<DistillSettings>,
     /// Visibility-aware guidance: how much the guidance acts on pixels that other training
     /// views observe (off by default; see [`crate::visibility`]).
     #[serde(default)]
@@ -518,8 +382,11 @@ impl MethodConfig {
         if let Some(msg) = self.visibility.check() {
             return Err(msg.into());
         }
-        self.rgb.settings("rgb")?;
-        self.normal.settings("normal")?;
+        for (table, settings) in [("rgb", &self.rgb), ("normal", &self.normal)] {
+            if let Some(s) = settings {
+                s.validate().map_err(|e| format!("[{table}] {e}"))?;
+            }
+        }
         if self.pre_inpainted && self.needs_prior() {
             return Err(
                 "pre_inpainted trains on every pixel of the 2D-inpainted images; it cannot be \
@@ -530,10 +397,10 @@ impl MethodConfig {
         if self.use_lora && !self.needs_prior() {
             return Err("use_lora = true but neither rgb nor normal guidance is active".into());
         }
-        if self.prompts.appearance.trim().is_empty() && self.rgb.is_active() {
+        if self.prompts.appearance.trim().is_empty() && self.rgb.is_some() {
             return Err("prompts.appearance must not be empty".into());
         }
-        if self.prompts.geometry.trim().is_empty() && self.normal.is_active() {
+        if self.prompts.geometry.trim().is_empty() && self.normal.is_some() {
             return Err("prompts.geometry must not be empty".into());
         }
         Ok(())
@@ -541,17 +408,7 @@ impl MethodConfig {
 
     /// True when a modality has guidance (the run needs a diffusion prior).
     pub fn needs_prior(&self) -> bool {
-        self.rgb.is_active() || self.normal.is_active()
-    }
-
-    /// The RGB guidance settings, if any (the config is validated on load).
-    pub fn rgb_settings(&self) -> Option<DistillSettings> {
-        self.rgb.settings("rgb").ok().flatten()
-    }
-
-    /// The normal guidance settings, if any.
-    pub fn normal_settings(&self) -> Option<DistillSettings> {
-        self.normal.settings("normal").ok().flatten()
+        self.rgb.is_some() || self.normal.is_some()
     }
 
     /// `step` (counted out of `reference_steps`) in a run of `total_steps` steps:
@@ -616,6 +473,7 @@ impl MethodConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use gb_diffusion::distill::GuidanceMethod;
 
     #[test]
     fn every_builtin_parses_and_matches_its_name() {
@@ -626,11 +484,11 @@ mod tests {
         let gb = MethodConfig::builtin("gb-nerf").unwrap();
         assert!(gb.use_lora && gb.needs_prior());
         assert_eq!(
-            gb.rgb_settings().unwrap().guidance,
+            gb.rgb.as_ref().unwrap().guidance,
             GuidanceMethod::Bsd { w1: 7.5, w2: 6.5 }
         );
         assert_eq!(
-            gb.normal_settings().unwrap().guidance,
+            gb.normal.as_ref().unwrap().guidance,
             GuidanceMethod::Bsd { w1: 1.5, w2: 0.5 }
         );
         assert_eq!((gb.lambda_rgb, gb.lambda_normal), (1e-4, 1e-4));
@@ -641,10 +499,10 @@ mod tests {
         assert!(!bsd.use_lora);
         assert_eq!(bsd.rgb, gb.rgb);
         let spin = MethodConfig::builtin("spin-nerf-sds").unwrap();
-        assert!(spin.rgb.is_active() && !spin.normal.is_active());
+        assert!(spin.rgb.is_some() && spin.normal.is_none());
         let csd = MethodConfig::builtin("csd").unwrap();
         assert!(matches!(
-            csd.rgb_settings().unwrap().guidance,
+            csd.rgb.as_ref().unwrap().guidance,
             GuidanceMethod::Csd { w3: Some(_), .. }
         ));
         assert!(!MethodConfig::builtin("none").unwrap().needs_prior());

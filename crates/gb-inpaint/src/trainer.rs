@@ -302,13 +302,9 @@ impl GuidanceState {
                 })
                 .transpose()
         };
-        let rgb = embed(
-            method.rgb_settings(),
-            &prompts.appearance,
-            &prompts.negative,
-        )?;
+        let rgb = embed(method.rgb.clone(), &prompts.appearance, &prompts.negative)?;
         let normal = embed(
-            method.normal_settings(),
+            method.normal.clone(),
             &prompts.geometry,
             &prompts.geometry_negative,
         )?;

@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use gb_diffusion::distill::GuidanceMethod;
 use gb_inpaint::method::BUILTIN_METHODS;
 use gb_inpaint::MethodConfig;
 use gb_nerf::train::NerfConfig;
@@ -131,8 +132,12 @@ pub fn method(h: &mut Harness) -> Result<(), String> {
             cfg.normal_start_step = n[2] as usize;
             cfg.max_consecutive_nan = 1 + n[3] as usize;
             cfg.normal_render_divisor = 1 + (n[4] % 8) as usize;
-            if cfg.rgb.w1.is_some() {
-                cfg.rgb.w1 = Some((x[3] * 10.0) as f32);
+            if let Some(settings) = &mut cfg.rgb {
+                if let GuidanceMethod::Csd { w1, .. } | GuidanceMethod::Bsd { w1, .. } =
+                    &mut settings.guidance
+                {
+                    *w1 = (x[3] * 10.0) as f32;
+                }
             }
             let text = toml::to_string(&cfg).map_err(|e| TestCaseError::fail(e.to_string()))?;
             let back = MethodConfig::from_toml(&text, origin)

@@ -14,17 +14,6 @@ use gb_diffusion::distill::{
 };
 use indicatif::ProgressStyle;
 
-/// Guidance method on the command line.
-#[derive(Debug, Clone, Copy, clap::ValueEnum)]
-pub enum Method {
-    /// Score Distillation Sampling (guidance scale = --w1).
-    Sds,
-    /// Classifier Score Distillation (w1, w2, w3; w3 defaults to w2 - w1).
-    Csd,
-    /// Balanced Score Distillation (w1, w2).
-    Bsd,
-}
-
 /// Arguments of `distill-image`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -44,9 +33,10 @@ pub struct Args {
     /// The negative prompt (CSD, BSD).
     #[arg(long, default_value = "")]
     pub negative_prompt: String,
-    /// Guidance method.
-    #[arg(long, value_enum, default_value = "bsd")]
-    pub method: Method,
+    /// Guidance method: sds (guidance scale = --w1), csd (w1, w2, w3; w3 defaults to
+    /// w2 - w1) or bsd (w1, w2).
+    #[arg(long, default_value = "bsd", value_parser = ["sds", "csd", "bsd"])]
+    pub method: String,
     /// w1 (SDS: the guidance scale, diffusers' convention).
     #[arg(long, default_value_t = 7.5)]
     pub w1: f32,
@@ -104,20 +94,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let prior = SdPrior::load(&prior_dir, &device)
         .with_context(|| format!("loading the prior from {}", prior_dir.display()))?;
     let resolution = args.resolution.unwrap_or(prior.resolution);
-    let guidance = match args.method {
-        Method::Sds => GuidanceMethod::Sds {
-            guidance_scale: args.w1,
-        },
-        Method::Csd => GuidanceMethod::Csd {
-            w1: args.w1,
-            w2: args.w2,
-            w3: args.w3,
-        },
-        Method::Bsd => GuidanceMethod::Bsd {
-            w1: args.w1,
-            w2: args.w2,
-        },
-    };
+    let guidance = GuidanceMethod::from_weights(&args.method, args.w1, args.w2, args.w3)
+        .with_context(|| format!("--method {}: expected sds, csd or bsd", args.method))?;
     let settings = DistillSettings {
         guidance,
         timesteps: TimestepConfig::default(),

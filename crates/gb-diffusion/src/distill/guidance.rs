@@ -1,6 +1,7 @@
 //! The one interface every score-distillation guidance implements (threestudio style: one
-//! small file per method, [`super::sds`], [`super::csd`], [`super::bsd`]), and the serialisable
-//! [`GuidanceMethod`] that a config names.
+//! small file per method, [`super::sds`], [`super::csd`], [`super::bsd`]), and the one
+//! [`GuidanceMethod`] that configs (through [`super::settings_table`]) and the command line
+//! name.
 //!
 //! A guidance declares which text conditionings ("branches") its single batched U-Net call
 //! evaluates, and combines the resulting noise predictions into the unweighted score
@@ -41,9 +42,9 @@ pub trait Guidance: Send + Sync {
     fn direction(&self, eps: &[Tensor<4>], noise: &Tensor<4>) -> Tensor<4>;
 }
 
-/// A guidance method and its weights, as named in a config (`method = "bsd"` ...).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "method", rename_all = "snake_case")]
+/// A guidance method and its weights (a config names it as `method = "bsd"` with its weights
+/// in the same table, see [`super::settings_table`]).
+#[derive(Debug, Clone, PartialEq)]
 pub enum GuidanceMethod {
     /// Score Distillation Sampling with classifier-free guidance scale `guidance_scale`
     /// (diffusers' convention, see [`Sds`]).
@@ -58,7 +59,6 @@ pub enum GuidanceMethod {
         /// Weight of `eps(y_neg)` (subtracted).
         w2: f32,
         /// Weight of `eps(null)`; `None` for the default `w2 - w1`.
-        #[serde(default)]
         w3: Option<f32>,
     },
     /// Balanced Score Distillation: `w1*eps(y) - w2*eps(y_neg)`.
@@ -79,6 +79,27 @@ impl GuidanceMethod {
     /// The paper's BSD weights for normal maps, `(w1, w2) = (1.5, 0.5)`.
     pub fn paper_normals() -> Self {
         GuidanceMethod::Bsd { w1: 1.5, w2: 0.5 }
+    }
+
+    /// Its name in configs and logs: `sds`, `csd` or `bsd`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            GuidanceMethod::Sds { .. } => "sds",
+            GuidanceMethod::Csd { .. } => "csd",
+            GuidanceMethod::Bsd { .. } => "bsd",
+        }
+    }
+
+    /// The method `name` (`sds`, `csd` or `bsd`) from the three weights of a command line:
+    /// SDS takes `w1` as its guidance scale, CSD all three (`w3 = None`: `w2 - w1`), BSD `w1`
+    /// and `w2`. `None` for another name.
+    pub fn from_weights(name: &str, w1: f32, w2: f32, w3: Option<f32>) -> Option<Self> {
+        Some(match name {
+            "sds" => GuidanceMethod::Sds { guidance_scale: w1 },
+            "csd" => GuidanceMethod::Csd { w1, w2, w3 },
+            "bsd" => GuidanceMethod::Bsd { w1, w2 },
+            _ => return None,
+        })
     }
 
     /// Checks the weights and builds the guidance.

@@ -27,6 +27,7 @@ pub mod noise;
 pub mod prior_input;
 pub mod sd_adapter;
 pub mod sds;
+pub mod settings_table;
 pub mod step;
 pub mod timestep;
 pub mod view_step;

@@ -61,19 +61,21 @@ pub struct DistillOutput {
     pub diagnostics: StepDiagnostics,
 }
 
-/// Settings of a [`ScoreDistiller`] (part of the distillation config).
+/// Settings of a [`ScoreDistiller`]: a method config's `[rgb]` / `[normal]` table, whose
+/// serde form is the flat table of [`super::settings_table`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(
+    try_from = "super::settings_table::SettingsTable",
+    into = "super::settings_table::SettingsTable"
+)]
 pub struct DistillSettings {
     /// Guidance method and weights.
     pub guidance: GuidanceMethod,
     /// Timestep range and schedule.
-    #[serde(default)]
     pub timesteps: TimestepConfig,
     /// `w(t)`.
-    #[serde(default)]
     pub weighting: Weighting,
     /// Optional symmetric clamp of the latent gradient (after masking).
-    #[serde(default)]
     pub grad_clamp: Option<f32>,
 }
 
@@ -85,6 +87,20 @@ impl DistillSettings {
             timesteps: TimestepConfig::default(),
             weighting: Weighting::OneMinusAlphaBar,
             grad_clamp: None,
+        }
+    }
+
+    /// Checks the timesteps, the weights (finite) and the clamp (finite, > 0).
+    pub fn validate(&self) -> Result<(), DistillError> {
+        self.timesteps.validate()?;
+        self.guidance.build()?;
+        match self.grad_clamp {
+            Some(value) if !value.is_finite() => Err(DistillError::NonFiniteWeight {
+                name: "grad_clamp",
+                value,
+            }),
+            Some(c) if c <= 0.0 => Err(DistillError::BadClamp(c)),
+            _ => Ok(()),
         }
     }
 
@@ -115,18 +131,7 @@ impl ScoreDistiller {
         alphas: AlphasCumprod,
         seed: u64,
     ) -> Result<Self, DistillError> {
-        settings.timesteps.validate()?;
-        if let Some(c) = settings.grad_clamp {
-            if !c.is_finite() {
-                return Err(DistillError::NonFiniteWeight {
-                    name: "grad_clamp",
-                    value: c,
-                });
-            }
-            if c <= 0.0 {
-                return Err(DistillError::BadClamp(c));
-            }
-        }
+        settings.validate()?;
         Ok(Self {
             guidance: settings.guidance.build()?,
             timesteps: settings.timesteps,

@@ -3,6 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use gb_diffusion::checkpoint::PriorSpec;
+use gb_diffusion::distill::{DistillSettings, GuidanceMethod};
 
 use super::{Grid, GridCell, GridSettings, SweepPoint};
 use crate::ablate::{ABLATION_ROWS, BASELINE_ROWS, DEFAULT_W3};
@@ -125,7 +126,7 @@ impl Grid {
                 use_lora: m.use_lora,
             })
             .collect();
-        let csd_w3 = (csd.rgb.w3, csd.normal.w3);
+        let csd_w3 = (csd_w3_of(&csd.rgb), csd_w3_of(&csd.normal));
         let mut sweep = Vec::new();
         for w in w3 {
             let reuse = cells.iter().any(|c| c.method == "csd")
@@ -141,8 +142,15 @@ impl Grid {
             let mut m = csd.clone();
             m.name = name.clone();
             m.description = format!("CSD with w3 = {w} on RGB and normal maps (w3 sweep)");
-            m.rgb.w3 = Some(w as f32);
-            m.normal.w3 = Some(w as f32);
+            for settings in [&mut m.rgb, &mut m.normal] {
+                if let Some(DistillSettings {
+                    guidance: GuidanceMethod::Csd { w3, .. },
+                    ..
+                }) = settings
+                {
+                    *w3 = Some(w as f32);
+                }
+            }
             let file = format!("{name}.toml");
             let path = grid_dir.join(&file);
             std::fs::create_dir_all(grid_dir).map_err(|e| InpaintError::io(grid_dir, e))?;
@@ -185,6 +193,14 @@ fn check_priors(settings: &GridSettings, methods: &[&MethodConfig]) -> Result<()
         }
     }
     Ok(())
+}
+
+/// The `w3` of a CSD guidance (`None` for another method, or CSD's default `w2 - w1`).
+fn csd_w3_of(settings: &Option<DistillSettings>) -> Option<f32> {
+    match settings.as_ref()?.guidance {
+        GuidanceMethod::Csd { w3, .. } => w3,
+        _ => None,
+    }
 }
 
 #[cfg(test)]
