@@ -42,7 +42,7 @@ enum Command {
     /// Run one network component on fixed inputs and write its outputs (parity checks).
     Parity(cmd::parity::Args),
     /// Benchmarks writing bench/results/*.json (`bench eval`, ...).
-    Bench(cmd::bench::Args),
+    Bench(gb_bench::Args),
     /// Property tests of every file reader (10 000 cases each), report in bench/results.
     Fuzz(cmd::fuzz::Args),
     /// Generate a procedural object-removal scene (stairs, fence) in the SPIn-NeRF layout.
@@ -124,7 +124,7 @@ fn main() {
         Command::InpaintImage(a) => cmd::inpaint_image::run(a),
         Command::DistillImage(a) => cmd::distill_image::run(a),
         Command::Parity(a) => cmd::parity::run(a),
-        Command::Bench(a) => cmd::bench::run(a),
+        Command::Bench(a) => gb_bench::run(a),
         Command::Fuzz(a) => cmd::fuzz::run(a),
         Command::Scene(a) => cmd::scene::run(a),
         Command::SceneInfo(a) => cmd::scene_info::run(a),

@@ -64,6 +64,19 @@ impl fmt::Display for BackendKind {
     }
 }
 
+/// `--device` on a command line: the backends by name, their aliases accepted, all listed
+/// by `--help`.
+#[cfg(feature = "clap")]
+impl clap::ValueEnum for BackendKind {
+    fn value_variants<'a>() -> &'a [Self] {
+        &BackendKind::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()).aliases(self.aliases().iter().copied()))
+    }
+}
+
 /// Error for an unknown backend name.
 #[derive(Debug, thiserror::Error)]
 #[error("unknown device '{0}': expected one of ndarray, flex, wgpu")]

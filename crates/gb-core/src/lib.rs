@@ -1,11 +1,14 @@
 //! Shared plumbing used by every gb-nerf-rs crate: run-time backend selection
 //! ([`backend`]), crash-safe file writes ([`atomic`]), PNG/JPEG image IO ([`image_io`]),
 //! progress bars that do not fight the log ([`progress`]), one-line error messages
-//! ([`messages`]) and row lookups with a parallel backward ([`indexing`]).
+//! ([`messages`]), row lookups with a parallel backward ([`indexing`]) and, with the
+//! `clap` feature, the command lines' value parsers (`cli`).
 
 pub mod assets;
 pub mod atomic;
 pub mod backend;
+#[cfg(feature = "clap")]
+pub mod cli;
 pub mod image_io;
 pub mod indexing;
 pub mod messages;

@@ -32,30 +32,8 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
-use gb_core::BackendKind;
 use gb_inpaint::grid::emit::{write_jobs, EmitOptions, Engine};
 use gb_inpaint::grid::{self, Grid, GridSettings, MergeReport};
-
-/// The settings of the method grid, shared by `cargo xtask ablate` and `bench quality`.
-#[derive(clap::Args, Debug, Clone)]
-pub struct GridArgs {
-    /// Comma-separated methods (default: the whole grid: none, spin-nerf-sds, mvip-nerf,
-    /// csd, gb-nerf, gb-nerf-unseen, sds-lora, bsd).
-    #[arg(long, value_delimiter = ',')]
-    pub methods: Option<Vec<String>>,
-    /// Preset name (fast, balanced, paper) or a TOML file, for every run.
-    #[arg(long, default_value = "fast")]
-    pub preset: String,
-    /// The diffusion prior of the guided methods: tiny (default), a folder or a hub id.
-    #[arg(long)]
-    pub prior: Option<String>,
-    /// Override the preset's number of training steps (at least 1).
-    #[arg(long, value_parser = super::parse::at_least_one)]
-    pub steps: Option<usize>,
-    /// Compute backend: ndarray, flex or wgpu.
-    #[arg(long, value_parser = super::parse::device())]
-    pub device: Option<BackendKind>,
-}
 
 /// Arguments of `cargo xtask ablate`.
 #[derive(clap::Args, Debug)]
@@ -65,7 +43,7 @@ pub struct Args {
     pub scene: Option<PathBuf>,
     /// The grid: methods, preset, prior, steps, device.
     #[command(flatten)]
-    pub grid: GridArgs,
+    pub grid: gb_bench::GridArgs,
     /// LoRA file for the methods with `use_lora = true` (default: the prior's own).
     #[arg(long)]
     pub lora: Option<PathBuf>,
@@ -105,24 +83,6 @@ pub struct Args {
     /// Write the tables from the finished cells (with --grid).
     #[arg(long, requires = "grid_dir")]
     pub merge: bool,
-}
-
-impl GridArgs {
-    /// The grid's shared settings on `scene` with training seed `seed` (no LoRA override, the
-    /// default metric weights, no orbit).
-    pub fn settings(&self, scene: PathBuf, seed: Option<u64>) -> GridSettings {
-        GridSettings {
-            scene,
-            preset: self.preset.clone(),
-            prior: self.prior.clone().unwrap_or_else(|| "tiny".into()),
-            lora: None,
-            steps: self.steps,
-            seed,
-            device: self.device.unwrap_or_default().name().into(),
-            weights: None,
-            orbit_frames: 0,
-        }
-    }
 }
 
 /// Plans the grid of `scene` into `out`: the settings of `grid`, the training seed, LoRA,

@@ -7,7 +7,7 @@ use gb_core::BackendKind;
 #[derive(clap::Args)]
 pub struct Args {
     /// Only check this backend.
-    #[arg(long, value_parser = super::parse::device())]
+    #[arg(long, value_enum)]
     device: Option<BackendKind>,
 }
 

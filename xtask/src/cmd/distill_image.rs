@@ -68,7 +68,7 @@ pub struct Args {
     #[arg(long)]
     pub grad_clamp: Option<f32>,
     /// Compute backend.
-    #[arg(long, value_parser = super::parse::device())]
+    #[arg(long, value_enum)]
     pub device: Option<BackendKind>,
     /// Output folder.
     #[arg(long)]

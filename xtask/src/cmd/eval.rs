@@ -60,7 +60,7 @@ pub struct Args {
     #[arg(long)]
     markdown: Option<PathBuf>,
     /// Backend for the network metrics.
-    #[arg(long, value_parser = super::parse::device())]
+    #[arg(long, value_enum)]
     device: Option<BackendKind>,
     /// LPIPS network: ST-LPIPS AlexNet (weights `stlpips_alex_shift_tolerant.safetensors`),
     /// or standard LPIPS with user weights `lpips_alex.safetensors` / `lpips_vgg.safetensors`

@@ -109,7 +109,7 @@ pub struct Args {
     #[arg(long)]
     pub validation_blend_known: bool,
     /// Compute backend: ndarray, flex or wgpu.
-    #[arg(long, default_value = "flex", value_parser = super::parse::device())]
+    #[arg(long, default_value = "flex", value_enum)]
     pub device: BackendKind,
     /// Output folder.
     #[arg(long, default_value = "out/finetune")]

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 
-use super::bench::{hostname, machine_description, today, write_report};
+use gb_bench::report::{hostname, machine_description, today, write_report};
 
 /// Arguments of `cargo xtask fuzz`.
 #[derive(clap::Args)]

@@ -91,13 +91,13 @@ pub struct Args {
     #[arg(long, default_value = "out/inpaint")]
     pub out: PathBuf,
     /// Compute backend: ndarray, flex or wgpu.
-    #[arg(long, value_parser = super::parse::device())]
+    #[arg(long, value_enum)]
     pub device: Option<BackendKind>,
     /// Continue from OUT/checkpoint.bin when it exists.
     #[arg(long)]
     pub resume: bool,
     /// Override the preset's number of training steps (at least 1).
-    #[arg(long, value_parser = super::parse::at_least_one)]
+    #[arg(long, value_parser = gb_core::cli::at_least_one)]
     pub steps: Option<usize>,
     /// Override the preset's training seed (`[train] seed`: ray batches, the guidance's
     /// timesteps and noise); `bench quality --seeds` repeats a grid over seeds with it.

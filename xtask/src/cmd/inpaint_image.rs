@@ -44,7 +44,7 @@ pub struct Args {
     #[arg(long)]
     blend_known: bool,
     /// Backend: ndarray, flex (default) or wgpu.
-    #[arg(long, value_parser = super::parse::device())]
+    #[arg(long, value_enum)]
     device: Option<BackendKind>,
 }
 

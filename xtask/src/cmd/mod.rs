@@ -1,7 +1,6 @@
 //! One module per subcommand.
 
 pub mod ablate;
-pub mod bench;
 pub mod devices;
 pub mod distill_image;
 pub mod eval;
@@ -10,6 +9,5 @@ pub mod fuzz;
 pub mod inpaint;
 pub mod inpaint_image;
 pub mod parity;
-pub mod parse;
 pub mod scene;
 pub mod scene_info;

@@ -78,7 +78,7 @@ pub struct Args {
     #[arg(long)]
     pub lora: Option<PathBuf>,
     /// Compute backend: ndarray, flex (default) or wgpu.
-    #[arg(long, value_parser = super::parse::device())]
+    #[arg(long, value_enum)]
     pub device: Option<BackendKind>,
     /// Weight variant.
     #[arg(long, value_enum, default_value_t)]

@@ -18,10 +18,10 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Image width in pixels (8 to 8192).
-    #[arg(long, default_value_t = 200, value_parser = super::parse::image_side)]
+    #[arg(long, default_value_t = 200, value_parser = gb_core::cli::image_side)]
     width: usize,
     /// Image height in pixels (8 to 8192).
-    #[arg(long, default_value_t = 150, value_parser = super::parse::image_side)]
+    #[arg(long, default_value_t = 150, value_parser = gb_core::cli::image_side)]
     height: usize,
     /// Number of views (train + test).
     #[arg(long, default_value_t = 24)]

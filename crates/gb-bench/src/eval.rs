@@ -45,7 +45,7 @@ pub struct Args {
     #[arg(long, default_value_t = 3)]
     repeats: usize,
     /// Backend for ST-LPIPS.
-    #[arg(long, value_parser = crate::cmd::parse::device())]
+    #[arg(long, value_enum)]
     device: Option<BackendKind>,
     /// The shared data folder (default: $GB_TEST_DATA).
     #[arg(long)]
@@ -231,7 +231,7 @@ fn time_python(
     gt_dir: &Path,
     weights: &Path,
 ) -> Value {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tools/eval_parity/bench_ref.py");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/eval_parity/bench_ref.py");
     let out = Command::new(python)
         .arg(&script)
         .args([

@@ -51,7 +51,7 @@ pub struct Args {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// The device measured.
-    #[arg(long, default_value = "wgpu", value_parser = crate::cmd::parse::device())]
+    #[arg(long, default_value = "wgpu", value_enum)]
     pub device: BackendKind,
     /// Python with torch and diffusers for the reference (default: the venv that the setup
     /// makes, else $GB_PYTHON, else python3); `none` skips it. Never used with `--smoke`.

@@ -27,7 +27,7 @@ pub struct Args {
     #[arg(long)]
     pub resolution: Option<usize>,
     /// Compute backend.
-    #[arg(long, value_parser = crate::cmd::parse::device())]
+    #[arg(long, value_enum)]
     pub device: Option<BackendKind>,
     /// Output JSON (default bench/results/distill-<device>.json).
     #[arg(long)]

@@ -34,7 +34,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     repeats: usize,
     /// Backend: ndarray, flex (default) or wgpu.
-    #[arg(long, value_parser = crate::cmd::parse::device())]
+    #[arg(long, value_enum)]
     device: Option<BackendKind>,
     /// Python with torch and diffusers (default: $GB_PYTHON, else python3 on PATH;
     /// `bash tools/bench/make_venv.sh` makes the pinned one); `none` skips the reference.

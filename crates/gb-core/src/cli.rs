@@ -1,17 +1,6 @@
-//! Value parsers shared by the subcommands' flags: `--device` with its possible values (so
-//! that `--help` lists them), and counts that must be at least one.
-
-use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
-use gb_core::BackendKind;
-
-/// `--device`: one of [`BackendKind::ALL`] by name (or an alias such as `cpu`), listed as
-/// the flag's possible values.
-pub fn device() -> impl TypedValueParser<Value = BackendKind> {
-    PossibleValuesParser::new(
-        BackendKind::ALL.map(|k| PossibleValue::new(k.name()).aliases(k.aliases().to_vec())),
-    )
-    .try_map(|name| name.parse::<BackendKind>())
-}
+//! Value parsers shared by the command lines (`cargo xtask` and the benchmark commands;
+//! feature `clap`): counts that must be at least one and image sides. `--device` is
+//! [`crate::BackendKind`] itself, a `clap::ValueEnum` under this feature.
 
 /// A count that must be at least 1 (`--steps`): 0 is refused with the reason.
 pub fn at_least_one(text: &str) -> Result<usize, String> {

@@ -46,7 +46,7 @@ pub struct Args {
     #[arg(long, default_value = "cpu")]
     pub torch_device: String,
     /// Backend that trains the accuracy points.
-    #[arg(long, default_value = "flex", value_parser = crate::cmd::parse::device())]
+    #[arg(long, default_value = "flex", value_enum)]
     pub accuracy_device: BackendKind,
     /// Also train every preset to completion on flex and record PSNR against wall time.
     #[arg(long)]

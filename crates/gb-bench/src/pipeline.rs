@@ -54,7 +54,7 @@ pub struct Args {
     #[arg(long, default_value_t = 2)]
     pub warmup: usize,
     /// Backend.
-    #[arg(long, value_parser = crate::cmd::parse::device())]
+    #[arg(long, value_enum)]
     pub device: Option<BackendKind>,
     /// Arithmetic of one guidance step at the prior's resolution, TFLOP.
     #[arg(long, default_value_t = 4.0)]

@@ -31,7 +31,7 @@ pub struct Args {
     /// The grid: methods (default: the whole grid, without the w3 sweep), preset, prior,
     /// steps, device.
     #[command(flatten)]
-    pub grid: crate::cmd::ablate::GridArgs,
+    pub grid: crate::GridArgs,
     /// Comma-separated training seeds; the tables are their mean (default: the preset's seed).
     #[arg(long, value_delimiter = ',')]
     pub seeds: Option<Vec<u64>>,
