@@ -44,7 +44,7 @@ if $names_source; then
     echo "tools/install/check.sh: the run's files name a source path" >&2
     exit 1
 fi
-printf '{"install_seconds": %s, "default_job_seconds": %s, "binary": "%s", "prior": "%s", "files_name_source": %s, "psnr_mean": %s}\n' \
-    "$install_s" "$run_s" "gb-nerf ($(du -h "$work/root/bin/gb-nerf" | cut -f1))" \
-    "${prior#"$work"/}" "$names_source" \
-    "$(sed -n 's/^  "psnr": \(.*\),$/\1/p' run/metrics.json | head -1 || echo null)"
+psnr="$(sed -n 's/^    "psnr": \([0-9.eE+-]*\),\{0,1\}$/\1/p' run/metrics.json | head -1)"
+printf '{"install_seconds": %s, "default_job_seconds": %s, "binary_size": "%s", "prior": "%s", "files_name_source": %s, "mean_psnr": %s}\n' \
+    "$install_s" "$run_s" "$(du -h "$work/root/bin/gb-nerf" | cut -f1)" \
+    "${prior#"$work"/}" "$names_source" "${psnr:-null}"
