@@ -69,6 +69,12 @@ fn the_installed_command_runs_the_default_job_without_the_source_tree() {
     );
     let config = std::fs::read_to_string(run.join("config.toml")).unwrap();
     assert!(config.contains("--prior tiny"), "{config}");
+    // its reproducing command is the installed command, not `cargo xtask`
+    assert!(
+        config.contains("\n#   gb-nerf inpaint --scene "),
+        "{config}"
+    );
+    assert!(!config.contains("cargo xtask"), "{config}");
 
     // nothing written names the source tree
     let source = workspace_root().canonicalize().unwrap();

@@ -68,15 +68,20 @@ fn init_logging() {
         .init();
 }
 
-/// Parses the command line; a usage error is printed as one `error: ...` line (exit 2),
-/// `--help` and `--version` as clap prints them.
-fn parse_cli() -> Cli {
-    // run by Cargo (`cargo xtask`, the tests) or as the installed command
-    let name = if std::env::var_os("CARGO").is_some() {
+/// How the user runs this command: `cargo xtask` when Cargo started it (in a clone, and in
+/// the tests), `gb-nerf` once installed. Usage lines and reproducing commands name it.
+pub fn program_name() -> &'static str {
+    if std::env::var_os("CARGO").is_some() {
         "cargo xtask"
     } else {
         "gb-nerf"
-    };
+    }
+}
+
+/// Parses the command line; a usage error is printed as one `error: ...` line (exit 2),
+/// `--help` and `--version` as clap prints them.
+fn parse_cli() -> Cli {
+    let name = program_name();
     let parsed = Cli::command()
         .name(name)
         .bin_name(name)

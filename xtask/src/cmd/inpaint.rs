@@ -140,6 +140,7 @@ impl Args {
             weights: self.weights.clone(),
             orbit_frames: self.orbit_frames,
             progress: true,
+            program: crate::program_name().into(),
         }
     }
 }

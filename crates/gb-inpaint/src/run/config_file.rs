@@ -62,7 +62,7 @@ pub fn write_config(spec: &RunSpec, r: &ResolvedRun) -> Result<(), InpaintError>
     let path = spec.out.join("config.toml");
     let cfg = path.display().to_string();
     let mut cmd = vec![
-        "cargo xtask inpaint".to_string(),
+        format!("{} inpaint", spec.program),
         format!(
             "--scene {}",
             shell_quote(&r.scene_dir.display().to_string())
@@ -134,7 +134,8 @@ pub fn write_config(spec: &RunSpec, r: &ResolvedRun) -> Result<(), InpaintError>
         body.push('\n');
     }
     let text = format!(
-        "# The resolved configuration of this run (cargo xtask inpaint). Reproduce it with\n#   {}\n{}",
+        "# The resolved configuration of this run ({} inpaint). Reproduce it with\n#   {}\n{}",
+        spec.program,
         cmd.join(" "),
         body
     );

@@ -68,6 +68,9 @@ pub struct RunSpec {
     pub orbit_frames: usize,
     /// Show progress bars.
     pub progress: bool,
+    /// The command that runs `inpaint`, for `config.toml`'s reproducing line: `cargo xtask`
+    /// in a clone, `gb-nerf` (the default) for the installed command.
+    pub program: String,
 }
 
 impl Default for RunSpec {
@@ -88,6 +91,7 @@ impl Default for RunSpec {
             weights: None,
             orbit_frames: 24,
             progress: false,
+            program: "gb-nerf".into(),
         }
     }
 }
