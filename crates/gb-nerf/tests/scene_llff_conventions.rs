@@ -71,6 +71,36 @@ fn test_masks_define_the_test_views_and_out_of_order_ones_warn() {
 }
 
 #[test]
+fn spin_nerf_test_masks_named_out_nnnnn_pair_with_the_unmasked_views_in_order() {
+    let d = tempfile::tempdir().unwrap();
+    fixture(d.path());
+    let before = llff::load(d.path(), &LlffOptions::default()).unwrap();
+    // SPIn-NeRF's naming: out_00001.png, out_00002.png in the test views' sorted order
+    let tl = d.path().join("images_1/test_label");
+    std::fs::rename(tl.join("view_000.png"), tl.join("out_00001.png")).unwrap();
+    std::fs::rename(tl.join("view_001.png"), tl.join("out_00002.png")).unwrap();
+    let s = llff::load(d.path(), &LlffOptions::default()).unwrap();
+    let test: Vec<&str> = s.split(Split::Test).map(|v| v.name.as_str()).collect();
+    assert_eq!(test, ["view_000", "view_001"]);
+    for (a, b) in s.views.iter().zip(&before.views) {
+        assert_eq!((a.split, &a.mask), (b.split, &b.mask), "{}", a.name);
+    }
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    assert!(
+        s.warnings[0].contains("paired in sorted order with the 2 views")
+            && s.warnings[0].contains("view_000 .. view_001"),
+        "{}",
+        s.warnings[0]
+    );
+    // a third mask: the counts no longer match, and the error names a mask file
+    std::fs::copy(tl.join("out_00002.png"), tl.join("out_00003.png")).unwrap();
+    let err = llff::load(d.path(), &LlffOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("out_0000"), "{err}");
+}
+
+#[test]
 fn without_test_masks_every_nth_view_is_held_out() {
     let d = tempfile::tempdir().unwrap();
     fixture(d.path());

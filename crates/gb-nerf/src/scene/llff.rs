@@ -6,7 +6,8 @@
 //!                             the sorted image names
 //! DIR/images_F/*.png|jpg      the images, downscaled by F (images/ means F = 1)
 //! DIR/images_F/label/         object masks of training views (0/1 or 0/255), same names
-//! DIR/images_F/test_label/    masks of the test views (SPIn-NeRF)
+//! DIR/images_F/test_label/    masks of the test views (SPIn-NeRF), named after the images,
+//!                             or out_00001.png, ... in the sorted order of the test views
 //! DIR/depth_F/NAME.npy        optional z-depth, H x W float32 (procedural scenes); 0 where
 //!                             there is no depth (NaN and infinity are refused)
 //! DIR/normal_F/NAME.npy       optional unit world normals, H x W x 3 float32 (finite)
@@ -16,6 +17,9 @@
 //! **Splits.** When `test_label/` exists, the views with a test mask are test views (the
 //! SPIn-NeRF convention: in a 100-view scene they are the first 40 sorted views, captured
 //! without the object); a warning is recorded when they are not the first K sorted views.
+//! Full SPIn-NeRF scenes name their test masks `out_00001.png`, `out_00002.png`, ... rather
+//! than after the images: when the masks do not name images but are as many as the views
+//! without a training mask, they pair with those views in sorted order, with a warning.
 //! Otherwise every view is a training view, unless [`LlffOptions::holdout_every`] is `Some(n)`:
 //! then views `0, n, 2n, ...` are test views (the NeRF "llffhold = 8" convention for fern).
 //!
@@ -151,6 +155,56 @@ fn mask_files(
     Ok(out)
 }
 
+/// Reads the test masks of `images_dir/test_label/` into `view name -> path`.
+///
+/// Masks named after their images pair by name. Full SPIn-NeRF scenes name them
+/// `out_00001.png`, `out_00002.png`, ... in the sorted order of the test views instead: when
+/// some mask names no image but there are as many masks as views without a training mask,
+/// the i-th sorted mask goes with the i-th such view, and a warning says so. Otherwise a mask
+/// that names no image is an error naming it.
+fn test_mask_files(
+    images_dir: &Path,
+    names: &BTreeMap<String, usize>,
+    train_masks: &BTreeMap<String, PathBuf>,
+    warnings: &mut Vec<String>,
+) -> Result<BTreeMap<String, PathBuf>, SceneError> {
+    let dir = images_dir.join("test_label");
+    if !dir.is_dir() {
+        return Ok(BTreeMap::new());
+    }
+    let files = list_images(&dir)?;
+    let Some(orphan) = files.iter().find(|p| !names.contains_key(&stem(p))) else {
+        return mask_files(&dir, images_dir, names);
+    };
+    // views in image order (`names` maps each stem to its sorted position)
+    let mut unmasked: Vec<(&String, usize)> = names
+        .iter()
+        .filter(|(n, _)| !train_masks.contains_key(*n))
+        .map(|(n, &i)| (n, i))
+        .collect();
+    unmasked.sort_by_key(|&(_, i)| i);
+    if unmasked.len() != files.len() {
+        return Err(SceneError::OrphanMask {
+            path: orphan.clone(),
+            images_dir: images_dir.to_path_buf(),
+        });
+    }
+    let pairs: BTreeMap<String, PathBuf> = unmasked
+        .iter()
+        .zip(&files)
+        .map(|(&(n, _), p)| (n.clone(), p.clone()))
+        .collect();
+    let (first, last) = (unmasked[0].0, unmasked[unmasked.len() - 1].0);
+    warnings.push(format!(
+        "{}: the {} test masks are not named after the images (SPIn-NeRF's out_NNNNN.png); \
+         paired in sorted order with the {} views that have no training mask ({first} .. {last})",
+        dir.display(),
+        files.len(),
+        unmasked.len(),
+    ));
+    Ok(pairs)
+}
+
 /// Loads an LLFF / SPIn-NeRF scene (see the module docs for the layout and conventions).
 pub fn load(dir: &Path, opts: &LlffOptions) -> Result<Scene, SceneError> {
     if !dir.is_dir() {
@@ -175,9 +229,9 @@ pub fn load(dir: &Path, opts: &LlffOptions) -> Result<Scene, SceneError> {
         .enumerate()
         .map(|(i, p)| (stem(p), i))
         .collect();
-    let train_masks = mask_files(&images_dir.join("label"), &images_dir, &names)?;
-    let test_masks = mask_files(&images_dir.join("test_label"), &images_dir, &names)?;
     let mut warnings = Vec::new();
+    let train_masks = mask_files(&images_dir.join("label"), &images_dir, &names)?;
+    let test_masks = test_mask_files(&images_dir, &names, &train_masks, &mut warnings)?;
 
     let norm = if opts.normalize {
         Normalization::nerf_llff(&poses)
