@@ -157,6 +157,7 @@ mod tests {
             far: 9.0,
             background: [1.0; 3],
             warnings: Vec::new(),
+            sparse_depth: Default::default(),
         }
     }
 

@@ -116,6 +116,7 @@ pub fn load(dir: &Path, opts: &BlenderOptions) -> Result<Scene, SceneError> {
         far,
         background: opts.background,
         warnings: Vec::new(),
+        sparse_depth: Default::default(),
     })
 }
 

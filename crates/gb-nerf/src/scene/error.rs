@@ -77,6 +77,14 @@ pub enum SceneError {
     /// An image could not be read.
     #[error(transparent)]
     Image(#[from] gb_core::ImageIoError),
+    /// A COLMAP model file is malformed or does not match the scene.
+    #[error("{path}: {reason}")]
+    Colmap {
+        /// The model file.
+        path: PathBuf,
+        /// What is wrong (with the line or byte offset where it applies).
+        reason: String,
+    },
     /// A mask file has no image of the same name.
     #[error("{path}: mask has no image of the same name in {images_dir}")]
     OrphanMask {

@@ -12,6 +12,9 @@
 //!                             there is no depth (NaN and infinity are refused)
 //! DIR/normal_F/NAME.npy       optional unit world normals, H x W x 3 float32 (finite)
 //! DIR/scene.json              optional; `aabb_min`/`aabb_max` make the scene Bounded
+//! DIR/sparse/0/               optional COLMAP model (.bin or .txt): every view must be one
+//!                             of its registered images (by file stem); its points become
+//!                             the scene's per-view sparse depth
 //! ```
 //!
 //! **Splits.** When `test_label/` exists, the views with a test mask are test views (the
@@ -37,6 +40,7 @@
 // Component loops over xyz / matrix entries read clearer with indices than with zips.
 #![allow(clippy::needless_range_loop)]
 
+use super::colmap::{self, SparseDepth};
 use super::files::{list_images, stem};
 use super::llff_poses::{read_poses_bounds, LlffPose, Normalization};
 use super::masks::read_mask;
@@ -327,6 +331,10 @@ pub fn load(dir: &Path, opts: &LlffOptions) -> Result<Scene, SceneError> {
             ));
         }
     }
+    let sparse_depth = match colmap::model_dir(dir) {
+        Some(model_dir) => sparse_depth_of(&model_dir, &views, norm.scale)?,
+        None => BTreeMap::new(),
+    };
     let near = 0.9 * poses.iter().map(|p| p.near).fold(f64::INFINITY, f64::min) * norm.scale;
     let far = poses.iter().map(|p| p.far).fold(0.0f64, f64::max) * norm.scale;
     let kind = match read_aabb(&dir.join("scene.json"))? {
@@ -350,7 +358,38 @@ pub fn load(dir: &Path, opts: &LlffOptions) -> Result<Scene, SceneError> {
         far: far as f32,
         background: [0.0; 3],
         warnings,
+        sparse_depth,
     })
+}
+
+/// The sparse depth of every view from the scene's COLMAP model in `model_dir`: each view
+/// must be a registered image (matched by file stem); keypoints are scaled from the
+/// camera's resolution to the loaded one, depths by the normalisation's scale.
+fn sparse_depth_of(
+    model_dir: &Path,
+    views: &[View],
+    scale: f64,
+) -> Result<BTreeMap<String, Vec<SparseDepth>>, SceneError> {
+    let model = colmap::Model::read(model_dir)?;
+    let images = model.match_stems(model_dir, views.iter().map(|v| v.name.as_str()))?;
+    let mut out = BTreeMap::new();
+    for (view, image) in views.iter().zip(images) {
+        let camera = &model.cameras[&image.camera_id];
+        let sx = view.image.width as f64 / camera.width.max(1) as f64;
+        let sy = view.image.height as f64 / camera.height.max(1) as f64;
+        let points = model
+            .sparse_depth(image)
+            .into_iter()
+            .map(|p| SparseDepth {
+                x: (p.x as f64 * sx) as f32,
+                y: (p.y as f64 * sy) as f32,
+                depth: (p.depth as f64 * scale) as f32,
+                error: (p.error as f64 * sx) as f32,
+            })
+            .collect();
+        out.insert(view.name.clone(), points);
+    }
+    Ok(out)
 }
 
 #[allow(clippy::too_many_arguments)]

@@ -14,6 +14,7 @@
 //! [`procedural`] generates the built-in benchmark scenes.
 
 pub mod blender;
+pub mod colmap;
 mod detect;
 mod error;
 pub mod files;

@@ -163,6 +163,10 @@ pub struct Scene {
     pub background: [f32; 3],
     /// Non-fatal problems found while loading (e.g. a resized mask).
     pub warnings: Vec<String>,
+    /// Sparse depth per view name, from the COLMAP model a scene ships (`sparse/0`, read by
+    /// the LLFF loader): pixel positions at the loaded resolution and z-depth in scene units.
+    /// Empty for scenes without one.
+    pub sparse_depth: std::collections::BTreeMap<String, Vec<super::colmap::SparseDepth>>,
 }
 
 impl Scene {

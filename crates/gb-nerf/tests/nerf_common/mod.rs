@@ -85,6 +85,7 @@ pub fn plane_scene(n_train: usize, w: usize, h: usize) -> Scene {
         far: 3.0,
         background: [0.0, 0.0, 0.0],
         warnings: vec![],
+        sparse_depth: Default::default(),
     }
 }
 
