@@ -205,7 +205,7 @@ fn model_of_scene(scene: &gb_nerf::scene::Scene) -> Model {
                 params: vec![c.fx as f64, c.fy as f64, c.cx as f64, c.cy as f64],
             },
         );
-        let (qvec, tvec) = pose_of_camera(&c.c2w);
+        let (qvec, tvec) = pose_of_camera(&c.c2w.map(|row| row.map(f64::from)));
         let depth = view.depth.as_ref().expect("procedural scenes have depth");
         let forward = [-c.c2w[0][2], -c.c2w[1][2], -c.c2w[2][2]];
         let origin = c.origin();
@@ -260,6 +260,8 @@ fn a_scene_with_a_colmap_model_gets_each_views_sparse_depth_on_its_surface() {
         dilate: 0,
     };
     procedural::write(&o, d.path()).unwrap();
+    // without the generator's noisy model: an exact one is built below
+    std::fs::remove_dir_all(d.path().join("sparse")).unwrap();
     let plain = llff::load(d.path(), &LlffOptions::default()).unwrap();
     assert!(plain.sparse_depth.is_empty());
     let mut model = model_of_scene(&plain);
@@ -296,4 +298,70 @@ fn a_scene_with_a_colmap_model_gets_each_views_sparse_depth_on_its_surface() {
         e.contains("sparse/0/images.bin") && e.contains("no registered image for view view_004"),
         "{e}"
     );
+}
+
+#[test]
+fn a_generated_scene_ships_sparse_points_on_its_surface_within_their_noise() {
+    use gb_nerf::scene::procedural::sparse::KEYPOINT_NOISE_PX;
+    use gb_nerf::scene::Split;
+    let d = tempfile::tempdir().unwrap();
+    let o = ProceduralOptions {
+        name: SceneName::Stairs,
+        seed: 1,
+        width: 64,
+        height: 48,
+        views: 6,
+        test_views: 2,
+        dilate: 0,
+    };
+    procedural::write(&o, d.path()).unwrap();
+    let model = Model::read(&d.path().join("sparse/0")).unwrap();
+    let s = llff::load(d.path(), &LlffOptions::default()).unwrap();
+    let train_ids: Vec<i32> = model
+        .images
+        .iter()
+        .filter(|(_, im)| {
+            let stem = im.name.trim_end_matches(".png");
+            s.views
+                .iter()
+                .any(|v| v.name == stem && v.split == Split::Train)
+        })
+        .map(|(id, _)| *id)
+        .collect();
+    assert_eq!(train_ids.len(), 4);
+    // every point is seen by at least two training views, and only by training views
+    assert!(model.points.len() > 100, "{}", model.points.len());
+    for p in model.points.values() {
+        assert!(p.track.len() >= 2, "{:?}", p.track);
+        assert!(p.track.iter().all(|(i, _)| train_ids.contains(i)));
+    }
+    // the depth error in units of the noise's depth scale (0.5 px at the point's depth)
+    let mut errors = Vec::new();
+    for view in &s.views {
+        let points = &s.sparse_depth[&view.name];
+        if view.split == Split::Test {
+            assert!(points.is_empty(), "{}", view.name);
+            continue;
+        }
+        assert!(points.len() > 20, "{}: {}", view.name, points.len());
+        let depth = view.depth.as_ref().unwrap();
+        for p in points {
+            let (x, y) = (p.x as usize, p.y as usize);
+            let gt = depth[y * view.camera.width + x];
+            let sigma = KEYPOINT_NOISE_PX as f32 * gt / view.camera.fx;
+            errors.push((p.depth - gt).abs() / sigma);
+        }
+    }
+    errors.sort_by(f32::total_cmp);
+    let at = |q: f32| errors[((errors.len() - 1) as f32 * q) as usize];
+    eprintln!(
+        "depth error / sigma: median {}, 90% {}, 99% {}, max {}",
+        at(0.5),
+        at(0.9),
+        at(0.99),
+        at(1.0)
+    );
+    assert!(at(0.5) > 0.05, "the points carry noise: median {}", at(0.5));
+    assert!(at(0.5) < 1.5, "median {}", at(0.5));
+    assert!(at(0.9) < 4.0, "90th percentile {}", at(0.9));
 }

@@ -232,11 +232,11 @@ impl Model {
 
 /// COLMAP's world-to-camera pose `(qvec, tvec)` of a camera given as an OpenGL
 /// camera-to-world `[R | t]` (x right, y up, looking along -z; [`crate::scene::Camera`]).
-pub fn pose_of_camera(c2w: &[[f32; 4]; 3]) -> ([f64; 4], [f64; 3]) {
+pub fn pose_of_camera(c2w: &[[f64; 4]; 3]) -> ([f64; 4], [f64; 3]) {
     // OpenGL -> OpenCV camera axes: flip y and z, then invert the rigid transform
     let r: [[f64; 3]; 3] =
-        std::array::from_fn(|i| std::array::from_fn(|j| c2w[j][i] as f64 * [1.0, -1.0, -1.0][i]));
-    let o = [c2w[0][3] as f64, c2w[1][3] as f64, c2w[2][3] as f64];
+        std::array::from_fn(|i| std::array::from_fn(|j| c2w[j][i] * [1.0, -1.0, -1.0][i]));
+    let o = [c2w[0][3], c2w[1][3], c2w[2][3]];
     let t = std::array::from_fn(|i| -(0..3).map(|j| r[i][j] * o[j]).sum::<f64>());
     (quaternion(&r), t)
 }

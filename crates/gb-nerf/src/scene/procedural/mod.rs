@@ -21,6 +21,9 @@
 //!                            facing the camera (world axes: y up, cameras look along -z)
 //! scene.json                 generator parameters and the scene's bounding box
 //!                            (`aabb_min`, `aabb_max` over every visible surface point)
+//! sparse/0/*.bin             a COLMAP model as a real capture has one: every view's pose,
+//!                            and train-view surface points seen by at least two train
+//!                            views, with about half a pixel of noise ([`sparse`])
 //! README.md                  this description
 //! ```
 //!
@@ -36,6 +39,7 @@ pub mod cameras;
 pub mod geometry;
 pub mod render;
 pub mod scenes;
+pub mod sparse;
 pub mod texture;
 pub mod world;
 mod writer;
