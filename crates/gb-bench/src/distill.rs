@@ -29,7 +29,7 @@ pub struct Args {
     /// Compute backend.
     #[arg(long, value_enum)]
     pub device: Option<BackendKind>,
-    /// Output JSON (default bench/results/distill-<device>.json).
+    /// Output JSON (default `bench/results/distill-<device>.json`).
     #[arg(long)]
     pub out: Option<PathBuf>,
 }

@@ -8,7 +8,7 @@
 //! interpreter); [`GridArgs`] are the method-grid flags that `ablate` and `bench quality`
 //! share. Adding a benchmark: write `<what>.rs` with `pub struct Args` (clap::Args) and
 //! `pub fn run(args: Args) -> anyhow::Result<()>`, declare it below, then add one variant to
-//! [`What`] and one arm to [`run`].
+//! `What` and one arm to [`run`].
 
 pub mod distill;
 pub mod eval;

@@ -12,7 +12,7 @@
 //! so libtest lists them as `ignored, needs the shared test data ...` and counts them in
 //! each summary's `N ignored`. [`test_data_dir`] still panics when the data is missing, so
 //! a test that needs it and is not marked fails rather than passing silently, and
-//! [`shared_data_guard!`] fails when the data appeared after such a build.
+//! [`crate::shared_data_guard!`] fails when the data appeared after such a build.
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -77,7 +77,7 @@ pub fn test_data_dir() -> PathBuf {
 /// changes or, with the data present, when its `data/` folder changes. A missing folder is
 /// not watched: Cargo reruns a build script that watches a missing path on every build, and
 /// the crate and everything above it would recompile each time. Data added later is picked
-/// up when `GB_TEST_DATA` changes (or `touch build.rs`); [`shared_data_guard!`] says so.
+/// up when `GB_TEST_DATA` changes (or `touch build.rs`); [`crate::shared_data_guard!`] says so.
 pub fn emit_build_script_cfg() {
     let (dir, present) = locate_test_data();
     println!("cargo::rustc-check-cfg=cfg({MISSING_CFG})");

@@ -12,7 +12,7 @@
 //! five ReLU feature maps (AlexNet relu1..relu5; VGG16 relu1_2, relu2_2, relu3_3, relu4_3,
 //! relu5_3); each unit-normalised over channels, squared difference weighted by the linear
 //! head, averaged over space, summed over the five layers. Identical to ST-LPIPS apart from the
-//! backbone (see [`crate::stlpips`]), so both share [`distance_from_features`].
+//! backbone (see [`crate::stlpips`]), so both share `distance_from_features`.
 
 use std::path::Path;
 

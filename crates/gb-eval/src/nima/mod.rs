@@ -5,7 +5,7 @@
 //! higher is better. No-reference: it scores each image alone.
 //!
 //! # Input pipeline
-//! As pyiqa in eval mode ([`preprocess`]): RGB in [0, 1] -> shorter side resized to 299
+//! As pyiqa in eval mode ([`preprocess()`]): RGB in [0, 1] -> shorter side resized to 299
 //! (torchvision bilinear, antialiased) -> 299x299 center crop -> `(x - 0.5) / 0.5`.
 //!
 //! # Weights
@@ -150,7 +150,7 @@ impl Nima {
         &self.device
     }
 
-    /// Runs a normalised batch `[N, 3, H, W]` (`H, W >= 75`; see [`preprocess`]).
+    /// Runs a normalised batch `[N, 3, H, W]` (`H, W >= 75`; see [`preprocess()`]).
     pub fn forward(&self, x: Tensor<4>) -> NimaOutput {
         let features = self.backbone.forward_pooled(x);
         let logits = self.head.logits(features.clone());

@@ -17,7 +17,7 @@
 //! with its reason, never as a number; only an unreadable input file is an error.
 //!
 //! # Adding a metric
-//! One entry in [`METRICS`] (its name, the regions it covers, the inputs it needs) and its
+//! One entry in the `METRICS` table (its name, the regions it covers, the inputs it needs) and its
 //! function in `metrics.rs`; its name must be one of [`crate::report::COLUMNS`].
 
 mod lpips_net;

@@ -62,7 +62,7 @@ fn absolute_prior(spec: &str) -> Result<String, InpaintError> {
 
 impl Grid {
     /// Plans the grid in `grid_dir`: the methods of `methods` (default: the whole grid, see
-    /// [`grid_methods`]) and the CSD w3 sweep over `w3` (default [`DEFAULT_W3`] when `csd` is
+    /// `grid_methods`) and the CSD w3 sweep over `w3` (default [`DEFAULT_W3`] when `csd` is
     /// in the grid, none otherwise; an empty list: no sweep). Every method file and, for the
     /// guided methods, the prior and LoRA are checked first; the sweep's method files
     /// (`csd-w3=X.toml`) are written into `grid_dir`.

@@ -2,7 +2,7 @@
 //! [`texture`], [`world`]) renders built-in scenes ([`scenes`]: `stairs`, `fence`) from a
 //! forward-facing, hand-held-looking arc of cameras ([`cameras`]), with exact ground truth.
 //!
-//! [`write`] stores a scene in the SPIn-NeRF layout, which [`crate::scene::llff::load`]
+//! [`write()`] stores a scene in the SPIn-NeRF layout, which [`crate::scene::llff::load`]
 //! reads back (depth and normals included):
 //!
 //! ```text
