@@ -208,3 +208,50 @@ fn normalisation_scales_depth_and_keeps_reprojection() {
         assert!(((n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt() - 1.0).abs() < 1e-5);
     }
 }
+
+#[test]
+fn bounds_do_not_change_when_the_test_views_are_removed() {
+    use gb_nerf::scene::npy::{encode_f64, read_float_array};
+    let d = tempfile::tempdir().unwrap();
+    fixture(d.path());
+    // the test views (the first two rows, as the views sort) see nearer and farther than
+    // any training view: their rows must not widen the scene's bounds
+    let poses = d.path().join("poses_bounds.npy");
+    let mut rows = read_float_array(&poses).unwrap().data;
+    let train_near = rows[2 * 17..]
+        .chunks(17)
+        .map(|r| r[15])
+        .fold(f64::INFINITY, f64::min);
+    let train_far = rows[2 * 17..].chunks(17).map(|r| r[16]).fold(0.0, f64::max);
+    for r in rows[..2 * 17].chunks_mut(17) {
+        (r[15], r[16]) = (0.5 * train_near, 2.0 * train_far);
+    }
+    std::fs::write(&poses, encode_f64(&[6, 17], &rows).unwrap()).unwrap();
+    let with_tests = llff::load(d.path(), &LlffOptions::default()).unwrap();
+    let test: Vec<String> = with_tests
+        .split(Split::Test)
+        .map(|v| v.name.clone())
+        .collect();
+    assert_eq!(test, ["view_000", "view_001"]);
+    assert_eq!(with_tests.near, (0.9 * train_near) as f32);
+    assert_eq!(with_tests.far, train_far as f32);
+    // delete the test views: images, masks, depth and normals, and their pose rows
+    for name in &test {
+        for f in [
+            format!("images_1/{name}.png"),
+            format!("images_1/test_label/{name}.png"),
+            format!("depth_1/{name}.npy"),
+            format!("normal_1/{name}.npy"),
+        ] {
+            std::fs::remove_file(d.path().join(f)).unwrap();
+        }
+    }
+    std::fs::write(&poses, encode_f64(&[4, 17], &rows[2 * 17..]).unwrap()).unwrap();
+    let without = llff::load(d.path(), &LlffOptions::default()).unwrap();
+    assert_eq!(without.views.len(), 4);
+    assert!(without.split(Split::Test).next().is_none());
+    assert_eq!(
+        (without.near, without.far, &without.kind),
+        (with_tests.near, with_tests.far, &with_tests.kind)
+    );
+}

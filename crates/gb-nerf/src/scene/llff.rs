@@ -31,7 +31,8 @@
 //! a warning is recorded.
 //!
 //! **Bounds.** `near = 0.9 * min(near bounds)`, `far = max(far bounds)` (nerf-pytorch's
-//! non-NDC choice).
+//! non-NDC choice), over the training views' rows only (all rows when no view is a test
+//! view): removing the test views does not change them.
 //!
 //! **Normalisation** (off by default): [`LlffOptions::normalize`] applies NeRF's LLFF
 //! convention, see [`Normalization::nerf_llff`]: the average camera becomes the identity
@@ -335,8 +336,17 @@ pub fn load(dir: &Path, opts: &LlffOptions) -> Result<Scene, SceneError> {
         Some(model_dir) => sparse_depth_of(&model_dir, &views, norm.scale)?,
         None => BTreeMap::new(),
     };
-    let near = 0.9 * poses.iter().map(|p| p.near).fold(f64::INFINITY, f64::min) * norm.scale;
-    let far = poses.iter().map(|p| p.far).fold(0.0f64, f64::max) * norm.scale;
+    // bounds from the training views only: a test view's row must not widen them
+    let has_train = views.iter().any(|v| v.split == Split::Train);
+    let bounded = || {
+        poses
+            .iter()
+            .zip(&views)
+            .filter(move |(_, v)| !has_train || v.split == Split::Train)
+            .map(|(p, _)| p)
+    };
+    let near = 0.9 * bounded().map(|p| p.near).fold(f64::INFINITY, f64::min) * norm.scale;
+    let far = bounded().map(|p| p.far).fold(0.0f64, f64::max) * norm.scale;
     let kind = match read_aabb(&dir.join("scene.json"))? {
         Some((lo, hi)) => {
             let (lo, hi) = transform_aabb(lo, hi, &norm);

@@ -20,7 +20,8 @@
 //! normal_1/NAME.npy          float32 [H, W, 3]: unit WORLD-space normal at that hit,
 //!                            facing the camera (world axes: y up, cameras look along -z)
 //! scene.json                 generator parameters and the scene's bounding box
-//!                            (`aabb_min`, `aabb_max` over every visible surface point)
+//!                            (`aabb_min`, `aabb_max` over every surface point a TRAIN
+//!                            view sees)
 //! sparse/0/*.bin             a COLMAP model as a real capture has one: every view's pose,
 //!                            and train-view surface points seen by at least two train
 //!                            views, with about half a pixel of noise ([`sparse`])
