@@ -179,7 +179,7 @@ fn test_mask_files(
     }
     let files = list_images(&dir)?;
     let Some(orphan) = files.iter().find(|p| !names.contains_key(&stem(p))) else {
-        return mask_files(&dir, images_dir, names);
+        return Ok(files.into_iter().map(|p| (stem(&p), p)).collect());
     };
     // views in image order (`names` maps each stem to its sorted position)
     let mut unmasked: Vec<(&String, usize)> = names

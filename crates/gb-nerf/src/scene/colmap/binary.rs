@@ -27,28 +27,27 @@ impl Reader<'_> {
         Ok(out)
     }
 
+    /// The next `N` bytes as an array.
+    fn array<const N: usize>(&mut self, what: &str) -> Result<[u8; N], SceneError> {
+        let mut out = [0u8; N];
+        out.copy_from_slice(self.take(N, what)?);
+        Ok(out)
+    }
+
     fn u64(&mut self, what: &str) -> Result<u64, SceneError> {
-        Ok(u64::from_le_bytes(
-            self.take(8, what)?.try_into().expect("8 bytes"),
-        ))
+        self.array(what).map(u64::from_le_bytes)
     }
 
     fn i64(&mut self, what: &str) -> Result<i64, SceneError> {
-        Ok(i64::from_le_bytes(
-            self.take(8, what)?.try_into().expect("8 bytes"),
-        ))
+        self.array(what).map(i64::from_le_bytes)
     }
 
     fn i32(&mut self, what: &str) -> Result<i32, SceneError> {
-        Ok(i32::from_le_bytes(
-            self.take(4, what)?.try_into().expect("4 bytes"),
-        ))
+        self.array(what).map(i32::from_le_bytes)
     }
 
     fn f64(&mut self, what: &str) -> Result<f64, SceneError> {
-        Ok(f64::from_le_bytes(
-            self.take(8, what)?.try_into().expect("8 bytes"),
-        ))
+        self.array(what).map(f64::from_le_bytes)
     }
 
     fn f64s<const N: usize>(&mut self, what: &str) -> Result<[f64; N], SceneError> {
@@ -161,8 +160,7 @@ pub(super) fn read(dir: &Path) -> Result<Model, SceneError> {
     for _ in 0..r.count("number of points", 43)? {
         let id = r.u64("point id")?;
         let xyz = r.f64s::<3>("xyz")?;
-        let c = r.take(3, "rgb")?;
-        let rgb = [c[0], c[1], c[2]];
+        let rgb = r.array::<3>("rgb")?;
         let error = r.f64("error")?;
         let n = r.count("track length", 8)?;
         let mut track = Vec::with_capacity(n);

@@ -128,10 +128,10 @@ pub(crate) fn bad(path: &Path, reason: impl Into<String>) -> SceneError {
 
 impl Model {
     /// Reads the model in `dir` (a `sparse/0` folder): the binary files when
-    /// `cameras.bin` exists, else the text files. Errors name the file and, for text, the
+    /// `cameras.bin` exists ([`is_binary`]), else the text files. Errors name the file and, for text, the
     /// line.
     pub fn read(dir: &Path) -> Result<Self, SceneError> {
-        let model = if dir.join("cameras.bin").is_file() {
+        let model = if is_binary(dir) {
             binary::read(dir)?
         } else if dir.join("cameras.txt").is_file() {
             text::read(dir)?
@@ -145,17 +145,12 @@ impl Model {
         Ok(model)
     }
 
-    /// Every image's camera and every observation's image and keypoint exist.
+    /// Every image's camera exists (the loader looks it up).
     fn check(&self, dir: &Path) -> Result<(), SceneError> {
-        let images = dir.join(if dir.join("images.bin").is_file() {
-            "images.bin"
-        } else {
-            "images.txt"
-        });
         for (id, im) in &self.images {
             if !self.cameras.contains_key(&im.camera_id) {
                 return Err(bad(
-                    &images,
+                    &images_file(dir),
                     format!(
                         "image {id} ({}) names camera {}, which the model lacks",
                         im.name, im.camera_id
@@ -164,11 +159,6 @@ impl Model {
             }
         }
         Ok(())
-    }
-
-    /// The image named `name`, if registered.
-    pub fn image_named(&self, name: &str) -> Option<&Image> {
-        self.images.values().find(|im| im.name == name)
     }
 
     /// The points observed in `image` with their z-depth in its camera (points behind the
@@ -199,11 +189,7 @@ impl Model {
         dir: &Path,
         stems: impl IntoIterator<Item = &'a str>,
     ) -> Result<Vec<&Image>, SceneError> {
-        let images = dir.join(if dir.join("images.bin").is_file() {
-            "images.bin"
-        } else {
-            "images.txt"
-        });
+        let images = images_file(dir);
         let stem_of = |name: &str| {
             Path::new(name)
                 .file_stem()
@@ -282,6 +268,21 @@ pub fn quaternion(r: &[[f64; 3]; 3]) -> [f64; 4] {
     } else {
         q
     }
+}
+
+/// Whether the model in `dir` is read from its binary files (`cameras.bin` exists).
+pub fn is_binary(dir: &Path) -> bool {
+    dir.join("cameras.bin").is_file()
+}
+
+/// The images file of the model in `dir` (`images.bin` or `images.txt`), which errors about
+/// registered images name.
+fn images_file(dir: &Path) -> PathBuf {
+    dir.join(if is_binary(dir) {
+        "images.bin"
+    } else {
+        "images.txt"
+    })
 }
 
 /// The rotation matrix of a unit quaternion `(w, x, y, z)` (normalised first).
