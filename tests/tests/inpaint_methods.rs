@@ -476,3 +476,49 @@ fn seed_overrides_the_presets_training_seed_and_reproduces_a_run() {
     assert_eq!(a, again, "the same seed must reproduce the run");
     assert_ne!(a, other, "another seed must draw other ray batches");
 }
+
+#[test]
+fn depth_selects_the_supervision_and_is_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, preset) = setup(dir.path());
+    let run = |depth: Option<&str>| {
+        let out = dir.path().join(depth.unwrap_or("default"));
+        let mut extra = vec!["--method", "none", "--steps", "3", "--orbit-frames", "0"];
+        if let Some(d) = depth {
+            extra.extend(["--depth", d]);
+        }
+        check(
+            &inpaint(&scene, &preset, &out, &extra),
+            &out.display().to_string(),
+        );
+        let cfg = std::fs::read_to_string(out.join("config.toml")).unwrap();
+        let recorded = format!("depth = \"{}\"", depth.unwrap_or("sparse"));
+        assert!(
+            cfg.lines().any(|l| l.trim() == recorded),
+            "config.toml does not record {recorded}:\n{cfg}"
+        );
+        log_lines(&out)
+            .iter()
+            .map(|l| l["loss"].as_f64().unwrap())
+            .collect::<Vec<f64>>()
+    };
+    let (default, sparse, dense, none) = (
+        run(None),
+        run(Some("sparse")),
+        run(Some("dense")),
+        run(Some("none")),
+    );
+    assert_eq!(default, sparse, "sparse is the presets' default");
+    assert_ne!(sparse, dense);
+    assert_ne!(sparse, none);
+    assert_ne!(dense, none);
+    let bad = inpaint(
+        &scene,
+        &preset,
+        &dir.path().join("bad"),
+        &["--depth", "lidar"],
+    );
+    assert_eq!(bad.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("--depth") && err.contains("lidar"), "{err}");
+}

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use gb_core::BackendKind;
 use gb_inpaint::grid::GridSettings;
+use gb_nerf::train::DepthSupervision;
 
 /// The settings of the method grid, shared by `cargo xtask ablate` and `bench quality`.
 #[derive(clap::Args, Debug, Clone)]
@@ -25,6 +26,9 @@ pub struct GridArgs {
     /// Compute backend: ndarray, flex or wgpu.
     #[arg(long, value_enum)]
     pub device: Option<BackendKind>,
+    /// Depth supervision of every run: sparse (the preset default), dense or none.
+    #[arg(long)]
+    pub depth: Option<DepthSupervision>,
 }
 
 impl GridArgs {
@@ -38,6 +42,7 @@ impl GridArgs {
             lora: None,
             steps: self.steps,
             seed,
+            depth: self.depth,
             device: self.device.unwrap_or_default().name().into(),
             weights: None,
             orbit_frames: 0,

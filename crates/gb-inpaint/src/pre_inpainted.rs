@@ -169,7 +169,14 @@ pub fn apply(scene: &mut Scene, scene_dir: &Path) -> Result<PreInpaintedReport, 
                 }
             }
         }
-        view.mask = None;
+        // the object's sparse points would pull the inpainted region back onto it
+        if let (Some(m), Some(points)) = (view.mask.take(), scene.sparse_depth.get_mut(&view.name))
+        {
+            points.retain(|p| {
+                let (x, y) = (p.x.max(0.0) as usize, p.y.max(0.0) as usize);
+                x >= m.width || y >= m.height || !m.data[y * m.width + x]
+            });
+        }
     }
     if report.depth_dir.is_some() && report.depths == 0 {
         report.warnings.push(format!(

@@ -376,7 +376,26 @@ fn pre_inpainted_images_and_depths_replace_the_masked_views() {
     )
     .unwrap();
     let second_mask = s.views[masked[1]].mask.clone().unwrap();
+    let masks: Vec<gb_nerf::scene::Mask> = masked
+        .iter()
+        .map(|&i| s.views[i].mask.clone().unwrap())
+        .collect();
+    let under_masks = |s: &gb_nerf::scene::Scene| -> (usize, usize) {
+        let (mut under, mut all) = (0, 0);
+        for (&i, m) in masked.iter().zip(&masks) {
+            for p in &s.sparse_depth[&s.views[i].name] {
+                all += 1;
+                under += m.data[p.y as usize * m.width + p.x as usize] as usize;
+            }
+        }
+        (under, all)
+    };
+    let (under_before, all_before) = under_masks(&s);
     let report = gb_inpaint::pre_inpainted::apply(&mut s, dir.path()).unwrap();
+    // the object's sparse points go with its masks; the others stay
+    let (under_after, all_after) = under_masks(&s);
+    assert!(under_before > 0, "the generated object has sparse points");
+    assert_eq!((under_after, all_after), (0, all_before - under_before));
     assert_eq!((report.images, report.depths), (masked.len(), 1));
     let near = s.near;
     for &i in &masked {

@@ -4,8 +4,8 @@
 //! ```text
 //! cargo xtask inpaint [--scene DIR] [--method M] [--preset P] [--prior none|tiny|DIR|HUB_ID]
 //!     [--lora FILE] [--prompt P] [--negative-prompt N] [--normal-prompt G] [--device D]
-//!     [--out DIR] [--resume] [--steps N] [--seed N] [--baseline DIR] [--weights DIR]
-//!     [--orbit-frames N]
+//!     [--out DIR] [--resume] [--steps N] [--seed N] [--depth sparse|dense|none]
+//!     [--baseline DIR] [--weights DIR] [--orbit-frames N]
 //! ```
 //!
 //! - `--method`: a built-in method (`configs/methods/`: gb-nerf, gb-nerf-unseen, bsd,
@@ -57,6 +57,7 @@ use std::path::PathBuf;
 use gb_core::BackendKind;
 use gb_inpaint::run::{run as run_spec, RunSpec, RunSummary};
 use gb_inpaint::PromptOverrides;
+use gb_nerf::train::DepthSupervision;
 
 /// Arguments of `cargo xtask inpaint`.
 #[derive(clap::Args, Debug)]
@@ -103,6 +104,10 @@ pub struct Args {
     /// timesteps and noise); `bench quality --seeds` repeats a grid over seeds with it.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Depth supervision: sparse (COLMAP's points in `sparse/0`, the preset default), dense
+    /// (per-pixel depth maps, an oracle real captures lack) or none.
+    #[arg(long)]
+    pub depth: Option<DepthSupervision>,
     /// Another run's output folder (or its `renders/`): its test-view renders are the
     /// baseline column of `report.html` (default: the masked input, said so on the page).
     #[arg(long)]
@@ -134,6 +139,7 @@ impl Args {
             device: self.device.unwrap_or_default(),
             seed: self.seed,
             steps: self.steps,
+            depth: self.depth,
             out: self.out.clone(),
             resume: self.resume,
             baseline: self.baseline.clone(),

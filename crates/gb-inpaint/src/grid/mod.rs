@@ -44,6 +44,9 @@ pub struct GridSettings {
     pub steps: Option<usize>,
     /// Overrides the preset's training seed.
     pub seed: Option<u64>,
+    /// Overrides the preset's depth supervision.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth: Option<gb_nerf::train::DepthSupervision>,
     /// The backend's name.
     pub device: String,
     /// Folder of metric weights (the plan's default: `$GB_TEST_DATA/weights` when it
@@ -149,6 +152,7 @@ impl Grid {
             })?,
             seed: s.seed,
             steps: s.steps,
+            depth: s.depth,
             out: grid_dir.join(&cell.dir),
             resume: true,
             baseline,

@@ -20,6 +20,7 @@ use std::time::Instant;
 
 use gb_core::BackendKind;
 use gb_eval::suite::{evaluate, PairSet, SuiteOptions};
+use gb_nerf::train::DepthSupervision;
 
 pub use config_file::shell_quote;
 pub use setup::{load_method, load_preset, method_and_prior};
@@ -56,6 +57,8 @@ pub struct RunSpec {
     pub seed: Option<u64>,
     /// Overrides the preset's number of steps.
     pub steps: Option<usize>,
+    /// Overrides the preset's depth supervision (`[train] depth`).
+    pub depth: Option<DepthSupervision>,
     /// The output folder.
     pub out: PathBuf,
     /// Continue from `OUT/checkpoint.bin` when it exists.
@@ -85,6 +88,7 @@ impl Default for RunSpec {
             device: BackendKind::default(),
             seed: None,
             steps: None,
+            depth: None,
             out: PathBuf::from("out/inpaint"),
             resume: false,
             baseline: None,
@@ -145,12 +149,27 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     if let Some(seed) = spec.seed {
         config.train.seed = seed;
     }
+    if let Some(depth) = spec.depth {
+        config.train.depth = depth;
+    }
     let prior = load_prior(spec, &method, prior_spec.as_deref())?;
 
     let (scene_dir, mut scene) = setup::load_or_generate(spec)?;
     setup::require_masks(&scene)?;
     let pre = if method.pre_inpainted {
-        Some(crate::pre_inpainted::apply(&mut scene, &scene_dir)?)
+        let report = crate::pre_inpainted::apply(&mut scene, &scene_dir)?;
+        // SPIn-NeRF supervises with its inpainted depth maps, densely (unless `--depth` says)
+        if report.depths > 0
+            && spec.depth.is_none()
+            && config.train.depth != DepthSupervision::Dense
+        {
+            tracing::info!(
+                depths = report.depths,
+                "pre-inpainted: the inpainted depth maps supervise densely (depth = \"dense\")"
+            );
+            config.train.depth = DepthSupervision::Dense;
+        }
+        Some(report)
     } else {
         None
     };

@@ -150,6 +150,11 @@ pub fn data_fingerprint(data: &TrainData) -> u64 {
         }
     }
     word(data.pixels.len() as u32);
+    word(data.sparse.len() as u32);
+    for p in &data.sparse {
+        word(p.view);
+        [p.x, p.y, p.depth].iter().for_each(|f| word(f.to_bits()));
+    }
     h
 }
 

@@ -3,6 +3,7 @@
 
 use gb_core::RgbImage;
 
+use super::DepthSupervision;
 use crate::scene::{Camera, Mask, Scene, Split, View};
 
 /// One training view, at the training resolution.
@@ -29,13 +30,29 @@ pub struct PixelRef {
     pub y: u32,
 }
 
-/// All training views and their unmasked pixels.
+/// A sparse depth sample: where a reconstructed 3D point (COLMAP's `points3D`) projects in
+/// a training view, at the training resolution, and its z-depth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SparseSample {
+    /// Index into [`TrainData::views`].
+    pub view: u32,
+    /// Continuous pixel x (0.5 is the centre of the first column).
+    pub x: f32,
+    /// Continuous pixel y.
+    pub y: f32,
+    /// z-depth, world units.
+    pub depth: f32,
+}
+
+/// All training views, their unmasked pixels and the depth that supervises them.
 #[derive(Debug, Clone)]
 pub struct TrainData {
-    /// The views.
+    /// The views; their dense `depth` is kept only under [`DepthSupervision::Dense`].
     pub views: Vec<TrainView>,
     /// Every pixel outside the masks.
     pub pixels: Vec<PixelRef>,
+    /// The scene's sparse points outside the masks, under [`DepthSupervision::Sparse`].
+    pub sparse: Vec<SparseSample>,
 }
 
 /// Downscales a camera by an integer factor.
@@ -131,24 +148,71 @@ pub fn prepare_view(v: &View, f: usize) -> TrainView {
     }
 }
 
+/// Whether pixel `(x, y)` of `v` lies under its mask.
+fn masked(v: &TrainView, x: usize, y: usize) -> bool {
+    v.mask
+        .as_ref()
+        .is_some_and(|m| m.width == v.image.width && m.data[y * m.width + x])
+}
+
+/// The sparse points of `view` (index `i`, training resolution `1 / f`) that supervise:
+/// inside the image, in front of the camera, and outside the mask (a point under the mask
+/// lies on the object being removed).
+fn sparse_samples(
+    scene: &Scene,
+    view: &View,
+    v: &TrainView,
+    i: usize,
+    f: usize,
+) -> Vec<SparseSample> {
+    let Some(points) = scene.sparse_depth.get(&view.name) else {
+        return Vec::new();
+    };
+    let s = 1.0 / f as f32;
+    points
+        .iter()
+        .map(|p| SparseSample {
+            view: i as u32,
+            x: p.x * s,
+            y: p.y * s,
+            depth: p.depth,
+        })
+        .filter(|p| {
+            let inside = p.x >= 0.0
+                && p.y >= 0.0
+                && (p.x as usize) < v.image.width
+                && (p.y as usize) < v.image.height;
+            inside && p.depth.is_finite() && p.depth > 0.0 && !masked(v, p.x as usize, p.y as usize)
+        })
+        .collect()
+}
+
 impl TrainData {
-    /// The training split of `scene` at `1 / downscale` resolution. Mask pixels are never
-    /// trained on. Errors when no trainable pixel remains.
-    pub fn from_scene(scene: &Scene, downscale: usize) -> Result<Self, super::NerfError> {
+    /// The training split of `scene` at `1 / downscale` resolution, with the depth that
+    /// `depth` selects. Mask pixels are never trained on. Errors when no trainable pixel
+    /// remains.
+    pub fn from_scene(
+        scene: &Scene,
+        downscale: usize,
+        depth: DepthSupervision,
+    ) -> Result<Self, super::NerfError> {
         let f = downscale.max(1);
-        let views: Vec<TrainView> = scene
-            .split(Split::Train)
-            .map(|v| prepare_view(v, f))
-            .collect();
+        let train: Vec<&View> = scene.split(Split::Train).collect();
+        let mut views: Vec<TrainView> = train.iter().map(|v| prepare_view(v, f)).collect();
+        let mut sparse = Vec::new();
+        if depth == DepthSupervision::Sparse {
+            for (i, (view, v)) in train.iter().zip(&views).enumerate() {
+                sparse.extend(sparse_samples(scene, view, v, i, f));
+            }
+        }
+        if depth != DepthSupervision::Dense {
+            views.iter_mut().for_each(|v| v.depth = None);
+        }
         let mut pixels = Vec::new();
         for (i, v) in views.iter().enumerate() {
             for y in 0..v.image.height {
                 for x in 0..v.image.width {
-                    let masked = v
-                        .mask
-                        .as_ref()
-                        .is_some_and(|m| m.width == v.image.width && m.data[y * m.width + x]);
-                    if !masked {
+                    if !masked(v, x, y) {
                         pixels.push(PixelRef {
                             view: i as u32,
                             x: x as u32,
@@ -165,6 +229,10 @@ impl TrainData {
                     .into(),
             });
         }
-        Ok(Self { views, pixels })
+        Ok(Self {
+            views,
+            pixels,
+            sparse,
+        })
     }
 }

@@ -9,6 +9,6 @@ pub mod losses;
 pub mod output;
 pub mod trainer;
 
-pub use config::{NerfConfig, RenderSettings, TrainSettings};
+pub use config::{DepthSupervision, NerfConfig, RenderSettings, TrainSettings};
 pub use error::NerfError;
 pub use trainer::{FitSummary, ReconstructionLoss, StepStats, Trainer};

@@ -1,5 +1,5 @@
-//! The reconstruction trainer: RGB loss on unmasked pixels, disparity loss where depth
-//! exists, Adam with an exponentially decaying learning rate, occupancy-grid updates,
+//! The reconstruction trainer: RGB loss on unmasked pixels, disparity loss on sparse points
+//! or dense depth ([`DepthSupervision`]), Adam with an exponentially decaying learning rate, occupancy-grid updates,
 //! progress bar, atomic checkpoints and resume.
 
 use std::path::Path;
@@ -17,7 +17,7 @@ use rand_chacha::ChaCha8Rng;
 use super::checkpoint::{self, CheckpointMeta, CheckpointParts, RngState};
 use super::data::TrainData;
 use super::losses::{disparity_loss, distortion_loss, mse, psnr_from_mse};
-use super::{NerfConfig, NerfError};
+use super::{DepthSupervision, NerfConfig, NerfError};
 use crate::field::NerfField;
 use crate::render::image::{render_image, ImageRender, ImageSettings};
 use crate::render::rays::camera_rays;
@@ -59,6 +59,11 @@ pub struct FitSummary {
     pub mean_evaluations_per_ray: f32,
 }
 
+/// The share of each batch's rays drawn through sparse points when the depth supervision is
+/// sparse (DS-NeRF draws its depth rays as a separate batch; here they are part of the
+/// batch, so a step costs the same with and without depth). Chosen a priori, not tuned.
+pub const SPARSE_RAY_SHARE: f32 = 0.25;
+
 /// The reconstruction state (see the module docs).
 pub struct Trainer {
     /// The configuration.
@@ -91,7 +96,8 @@ pub struct Trainer {
 impl Trainer {
     /// A fresh trainer for `scene`.
     pub fn new(scene: &Scene, config: NerfConfig, backend: BackendKind) -> Result<Self, NerfError> {
-        let data = TrainData::from_scene(scene, config.train.image_downscale)?;
+        let depth = config.train.depth;
+        let data = TrainData::from_scene(scene, config.train.image_downscale, depth)?;
         if !(scene.near.is_finite() && scene.far.is_finite() && scene.near < scene.far) {
             return Err(NerfError::Scene {
                 scene: scene.name.clone(),
@@ -102,7 +108,17 @@ impl Trainer {
         device.seed(config.train.seed);
         let field = config.field.init(&device);
         let space = SceneSpace::from_scene(scene);
-        let has_depth = data.views.iter().any(|v| v.depth.is_some());
+        let has_depth = !data.sparse.is_empty() || data.views.iter().any(|v| v.depth.is_some());
+        if depth != DepthSupervision::None && !has_depth {
+            tracing::warn!(
+                scene = %scene.name,
+                "depth = \"{depth}\" but the scene has no {} depth for its training views \
+                 outside the masks: training on colour alone",
+                if depth == DepthSupervision::Sparse { "sparse (COLMAP sparse/0)" } else { "dense" }
+            );
+        } else if depth == DepthSupervision::Sparse {
+            tracing::info!(points = data.sparse.len(), "sparse depth supervision");
+        }
         let data_fingerprint = checkpoint::data_fingerprint(&data);
         let mut trainer = Self {
             data,
@@ -157,14 +173,33 @@ impl Trainer {
         }
     }
 
-    /// Draws `n` random unmasked training pixels: rays, target colours, and (near-scaled)
-    /// target disparities with their validity.
+    /// Draws a batch of `n` training rays: rays, target colours, and (near-scaled) target
+    /// disparities with their validity. With sparse depth, [`SPARSE_RAY_SHARE`] of the rays
+    /// go through random sparse points (their colour is the pixel the point falls in); the
+    /// rest through random unmasked pixels.
     fn batch_rays(&mut self, n: usize) -> (RayBatch, Vec<f32>, Vec<f32>, Vec<f32>) {
         let mut rays = RayBatch::default();
         let mut rgb = Vec::with_capacity(n * 3);
         let mut disp = Vec::with_capacity(n);
         let mut valid = Vec::with_capacity(n);
-        for _ in 0..n {
+        let n_sparse = if self.data.sparse.is_empty() {
+            0
+        } else {
+            ((n as f32 * SPARSE_RAY_SHARE).round() as usize).clamp(1, n)
+        };
+        for _ in 0..n_sparse {
+            let p = self.data.sparse[self.rng.random_range(0..self.data.sparse.len())];
+            let v = &self.data.views[p.view as usize];
+            let r = camera_rays(&v.camera, &[[p.x, p.y]], &self.space, self.near, self.far);
+            rays.origins.extend(r.origins);
+            rays.dirs.extend(r.dirs);
+            rays.near.extend(r.near);
+            rays.far.extend(r.far);
+            rgb.extend_from_slice(&v.image.get(p.x as usize, p.y as usize));
+            disp.push(self.near / p.depth);
+            valid.push(1.0);
+        }
+        for _ in n_sparse..n {
             let p = self.data.pixels[self.rng.random_range(0..self.data.pixels.len())];
             let v = &self.data.views[p.view as usize];
             let px = [p.x as f32 + 0.5, p.y as f32 + 0.5];
