@@ -50,6 +50,9 @@ def main():
     ap.add_argument("--prompt", required=True)
     ap.add_argument("--negative-prompt", default="")
     ap.add_argument("--prior", default="tiny")
+    ap.add_argument("--lora", action="append", default=[],
+                    help="LoRA file merged into the prior, in order (repeatable: the prior's "
+                         "geometric LoRA, then a run's personalize/lora.safetensors)")
     ap.add_argument("--resolution", type=int, default=64)
     ap.add_argument("--samples", type=int, default=4)
     ap.add_argument("--steps", type=int, default=20)
@@ -108,7 +111,8 @@ def main():
             for seed in range(a.samples):
                 out = os.path.join(a.work, f"{name}{tag}_s{seed}.png")
                 if not (a.reuse and os.path.exists(out)):
-                    subprocess.run([a.xtask, "inpaint-image", "--prior", a.prior,
+                    loras = [arg for f in a.lora for arg in ("--lora", f)]
+                    subprocess.run([a.xtask, "inpaint-image", "--prior", a.prior, *loras,
                                     "--image", image_path, "--mask", hole_path,
                                     "--prompt", a.prompt, "--negative-prompt", a.negative_prompt,
                                     "--steps", str(a.steps), "--seed", str(seed),
@@ -143,7 +147,7 @@ def main():
     mean = {k: float(np.mean([r[k] for r in rows.values() if k in r])) for k in keys}
     print("mean", {k: round(v, 2) for k, v in mean.items()})
     doc = {"diagnosis": "masked PSNR (dB) in the guidance crop of each test view",
-           "scene": a.scene, "prior": a.prior, "resolution": a.resolution,
+           "scene": a.scene, "prior": a.prior, "lora": a.lora, "resolution": a.resolution,
            "ddim_steps": a.steps, "samples": a.samples, "blend_known": True,
            "condition_on": a.condition_on or None,
            "prompt": a.prompt, "negative_prompt": a.negative_prompt,

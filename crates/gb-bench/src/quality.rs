@@ -163,7 +163,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .as_secs();
     let depth = match args.grid.depth {
         Some(d) => d,
-        None => gb_nerf::train::NerfConfig::preset(&args.grid.preset)?.train.depth,
+        None => {
+            gb_nerf::train::NerfConfig::preset(&args.grid.preset)?
+                .train
+                .depth
+        }
     };
     for &name in &args.scenes {
         let seeds: Vec<Option<u64>> = match &args.seeds {

@@ -123,6 +123,12 @@ pub enum InpaintError {
     /// The score distillation failed.
     #[error("score distillation: {0}")]
     Distill(#[from] DistillError),
+    /// Per-scene personalisation of the prior failed ([`crate::personalize`]).
+    #[error("personalisation: {reason}")]
+    Personalize {
+        /// What failed, with its cause.
+        reason: String,
+    },
     /// A file could not be read or written.
     #[error("{path}: {source}")]
     Io {

@@ -9,6 +9,8 @@
 //!   gb-nerf-unseen, bsd, mvip-nerf, spin-nerf-sds, csd, none, pre-inpainted), prompts, and
 //!   how lambda maps to the paper's scale;
 //! - [`prior`]: loading the prior folder and attaching a LoRA;
+//! - [`personalize`]: the per-scene LoRA, fine-tuned on the scene's unmasked pixels before
+//!   guidance starts;
 //! - [`crop`]: the mask's bounding-box crop, rendered at the prior's resolution (RGB, pasted
 //!   on the ground truth or not) and as a normal map;
 //! - [`guidance`]: one guidance term injected as `lambda * s(t) * (z * g.detach()).sum()`;
@@ -39,6 +41,7 @@ pub mod gif;
 pub mod grid;
 pub mod guidance;
 pub mod method;
+pub mod personalize;
 pub mod pre_inpainted;
 pub mod prior;
 pub mod report;

@@ -279,6 +279,10 @@ pub struct MethodConfig {
     /// views observe (off by default; see [`crate::visibility`]).
     #[serde(default)]
     pub visibility: VisibilityConfig,
+    /// Per-scene personalisation of the prior before guidance (off by default; see
+    /// [`crate::personalize`]).
+    #[serde(default)]
+    pub personalize: crate::personalize::PersonalizeSettings,
 }
 
 fn default_lambda() -> f64 {

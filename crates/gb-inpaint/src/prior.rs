@@ -71,6 +71,19 @@ pub fn lora_for(
     }
 }
 
+/// Reads a LoRA file; the error names it once.
+fn read_lora(path: &Path) -> Result<LoraFile, InpaintError> {
+    LoraFile::read(path).map_err(|e| {
+        // gb-diffusion's message already starts with "LoRA file PATH: "
+        let text = e.to_string();
+        let prefix = format!("LoRA file {}: ", path.display());
+        InpaintError::Lora {
+            path: path.to_path_buf(),
+            reason: text.strip_prefix(&prefix).unwrap_or(&text).to_string(),
+        }
+    })
+}
+
 /// What was loaded, for `config.toml` and the logs.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PriorInfo {
@@ -78,6 +91,9 @@ pub struct PriorInfo {
     pub folder: PathBuf,
     /// The LoRA file attached, if any.
     pub lora: Option<PathBuf>,
+    /// The per-scene LoRA merged on top, if any ([`crate::personalize`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub personal_lora: Option<PathBuf>,
     /// Weights adapted by the LoRA in the U-Net.
     pub lora_unet_weights: usize,
     /// Weights adapted by the LoRA in the text encoder.
@@ -110,6 +126,17 @@ impl GuidancePrior {
     /// Loads the prior folder `root` on `device` (the plain device of the run's backend) and
     /// attaches `lora` (see the module docs).
     pub fn load(root: &Path, lora: Option<&Path>, device: &Device) -> Result<Self, InpaintError> {
+        Self::load_personalized(root, lora, None, device)
+    }
+
+    /// [`Self::load`], then the per-scene LoRA `personal` ([`crate::personalize`], trained on
+    /// top of the prior with `lora` merged) merged as well.
+    pub fn load_personalized(
+        root: &Path,
+        lora: Option<&Path>,
+        personal: Option<&Path>,
+        device: &Device,
+    ) -> Result<Self, InpaintError> {
         let prior_err = |component: &str, e: &dyn std::fmt::Display| InpaintError::Prior {
             path: root.to_path_buf(),
             reason: format!("{component}: {e}"),
@@ -122,18 +149,8 @@ impl GuidancePrior {
                     .into(),
             });
         }
-        let lora_file = match lora {
-            Some(p) => Some(LoraFile::read(p).map_err(|e| {
-                // gb-diffusion's message already starts with "LoRA file PATH: "
-                let text = e.to_string();
-                let prefix = format!("LoRA file {}: ", p.display());
-                InpaintError::Lora {
-                    path: p.to_path_buf(),
-                    reason: text.strip_prefix(&prefix).unwrap_or(&text).to_string(),
-                }
-            })?),
-            None => None,
-        };
+        let lora_file = lora.map(read_lora).transpose()?;
+        let personal_file = personal.map(read_lora).transpose()?;
         let lora_err = |e: &dyn std::fmt::Display| InpaintError::Lora {
             path: lora.map(Path::to_path_buf).unwrap_or_default(),
             reason: e.to_string(),
@@ -152,6 +169,13 @@ impl GuidancePrior {
                 "LoRA attached and merged"
             );
         }
+        if let Some(file) = &personal_file {
+            (loaded, _) = loaded.merge_lora(file).map_err(|e| InpaintError::Lora {
+                path: file.path.clone(),
+                reason: e.to_string(),
+            })?;
+            tracing::info!(lora = %file.path.display(), "per-scene LoRA merged");
+        }
         let parts = Parts {
             in_channels: loaded.unet_config.in_channels,
             sample_size: loaded.unet_config.sample_size,
@@ -163,12 +187,14 @@ impl GuidancePrior {
             tokenizer: loaded.tokenizer,
             alphas,
         };
-        Ok(parts.into_prior(
+        let mut prior = parts.into_prior(
             root.to_path_buf(),
             lora.map(Path::to_path_buf),
             (counts.unet, counts.text_encoder),
             device,
-        ))
+        );
+        prior.info.personal_lora = personal.map(Path::to_path_buf);
+        Ok(prior)
     }
 
     /// A prior of the given shapes with random weights (no files but the tokenizer at
@@ -233,6 +259,7 @@ impl Parts {
             info: PriorInfo {
                 folder,
                 lora,
+                personal_lora: None,
                 lora_unet_weights: lora_weights.0,
                 lora_text_encoder_weights: lora_weights.1,
                 resolution,

@@ -5,7 +5,7 @@
 //! cargo xtask inpaint [--scene DIR] [--method M] [--preset P] [--prior none|tiny|DIR|HUB_ID]
 //!     [--lora FILE] [--prompt P] [--negative-prompt N] [--normal-prompt G] [--device D]
 //!     [--out DIR] [--resume] [--steps N] [--seed N] [--depth sparse|dense|none]
-//!     [--baseline DIR] [--weights DIR] [--orbit-frames N]
+//!     [--personalize STEPS] [--baseline DIR] [--weights DIR] [--orbit-frames N]
 //! ```
 //!
 //! - `--method`: a built-in method (`configs/methods/`: gb-nerf, gb-nerf-unseen, bsd,
@@ -108,6 +108,11 @@ pub struct Args {
     /// (per-pixel depth maps, an oracle real captures lack) or none.
     #[arg(long)]
     pub depth: Option<DepthSupervision>,
+    /// Personalise the prior to the scene first: fine-tune a per-scene LoRA for this many
+    /// steps on the training views' unmasked patches (cached in OUT/personalize/; 0: off;
+    /// default: the method's `[personalize] steps`).
+    #[arg(long, value_name = "STEPS")]
+    pub personalize: Option<usize>,
     /// Another run's output folder (or its `renders/`): its test-view renders are the
     /// baseline column of `report.html` (default: the masked input, said so on the page).
     #[arg(long)]
@@ -140,6 +145,7 @@ impl Args {
             seed: self.seed,
             steps: self.steps,
             depth: self.depth,
+            personalize: self.personalize,
             out: self.out.clone(),
             resume: self.resume,
             baseline: self.baseline.clone(),

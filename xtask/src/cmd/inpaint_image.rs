@@ -15,6 +15,10 @@ pub struct Args {
     /// text_encoder, unet with 9 input channels, vae, scheduler) or a cached hub id.
     #[arg(long)]
     prior: String,
+    /// LoRA files (.safetensors) merged into the U-Net and text encoder, in order (repeat the
+    /// flag: a prior's geometric LoRA, then a run's per-scene `personalize/lora.safetensors`).
+    #[arg(long)]
+    lora: Vec<PathBuf>,
     /// Input image (PNG/JPEG); its size must be a multiple of the VAE factor (8 for SD).
     #[arg(long)]
     image: PathBuf,
@@ -72,8 +76,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let kind = args.device.unwrap_or_default();
     let device = kind.device();
     let prior_dir = gb_diffusion::checkpoint::resolve_prior(&args.prior)?;
-    let prior = InpaintPrior::load(&prior_dir, &device)
+    let mut prior = InpaintPrior::load(&prior_dir, &device)
         .with_context(|| format!("loading prior {}", prior_dir.display()))?;
+    for lora in &args.lora {
+        prior = prior
+            .with_lora(lora)
+            .with_context(|| format!("--lora {}", lora.display()))?
+            .0;
+    }
     tracing::info!(device = %kind, steps = args.steps, "prior loaded from {}", prior_dir.display());
 
     let req = InpaintRequest {

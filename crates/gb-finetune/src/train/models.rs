@@ -11,6 +11,7 @@ use gb_diffusion::clip::text_model::ClipTextModel;
 use gb_diffusion::config::{
     AutoencoderKLConfig, ClipTextConfig, SchedulerConfig, UNet2DConditionConfig,
 };
+use gb_diffusion::lora::LoraFile;
 use gb_diffusion::models::{AutoencoderKL, UNet2DConditionModel};
 use gb_diffusion::pipeline::SdComponents;
 use gb_diffusion::scheduler::betas;
@@ -82,8 +83,24 @@ impl PriorModels {
     /// Loads tokenizer, text encoder, U-Net, VAE and scheduler of a diffusers inpainting
     /// folder onto `device` (use an autodiff device to train).
     pub fn load(root: &Path, device: &Device) -> Result<Self, FinetuneError> {
-        let c = SdComponents::load(root, device, device)
+        Self::load_merged(root, None, device)
+    }
+
+    /// [`Self::load`], with the LoRA `lora` merged into the U-Net and text-encoder weights
+    /// first (a prior's geometric LoRA, which a per-scene LoRA is then trained on top of).
+    pub fn load_merged(
+        root: &Path,
+        lora: Option<&LoraFile>,
+        device: &Device,
+    ) -> Result<Self, FinetuneError> {
+        let mut c = SdComponents::load(root, device, device)
             .map_err(|e| diffusion(e.component, root)(e.source.to_string()))?;
+        if let Some(file) = lora {
+            c = c
+                .merge_lora(file)
+                .map_err(|e| diffusion("merging the LoRA", &file.path)(e.to_string()))?
+                .0;
+        }
         if c.unet_config.in_channels != 9 {
             return Err(FinetuneError::Invalid {
                 path: root.join("unet").join("config.json"),

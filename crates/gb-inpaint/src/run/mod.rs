@@ -29,6 +29,7 @@ pub use test_views::disparity_map;
 
 use crate::error::InpaintError;
 use crate::method::{PromptOverrides, SceneCaptions};
+use crate::personalize::{PersonalizeInputs, PersonalizeReport};
 use crate::prior::{lora_for, GuidancePrior};
 use crate::report::RunPage;
 use crate::trainer::{FitOptions, GuidedTrainer};
@@ -59,6 +60,8 @@ pub struct RunSpec {
     pub steps: Option<usize>,
     /// Overrides the preset's depth supervision (`[train] depth`).
     pub depth: Option<DepthSupervision>,
+    /// Overrides the method's personalisation steps (`[personalize] steps`; 0: off).
+    pub personalize: Option<usize>,
     /// The output folder.
     pub out: PathBuf,
     /// Continue from `OUT/checkpoint.bin` when it exists.
@@ -89,6 +92,7 @@ impl Default for RunSpec {
             seed: None,
             steps: None,
             depth: None,
+            personalize: None,
             out: PathBuf::from("out/inpaint"),
             resume: false,
             baseline: None,
@@ -135,13 +139,56 @@ fn load_prior(
     )?))
 }
 
+/// Personalises `prior` to the scene when the method asks for it ([`crate::personalize`]):
+/// trains or reuses `OUT/personalize/lora.safetensors`, then reloads the prior with it
+/// merged. A method without a prior ignores the setting, with a note in the log.
+fn personalize_prior(
+    spec: &RunSpec,
+    method: &crate::MethodConfig,
+    scene: &gb_nerf::scene::Scene,
+    config: &gb_nerf::train::NerfConfig,
+    prompts: &crate::Prompts,
+    prior: &mut Option<GuidancePrior>,
+) -> Result<Option<PersonalizeReport>, InpaintError> {
+    if !method.personalize.enabled() {
+        return Ok(None);
+    }
+    let Some(p) = prior.as_ref() else {
+        tracing::info!(method = %method.name, "method has no prior: personalisation not used");
+        return Ok(None);
+    };
+    let info = p.info.clone();
+    let report = crate::personalize::personalize(&PersonalizeInputs {
+        scene,
+        downscale: config.train.image_downscale,
+        crop_margin: method.crop_margin,
+        prior: &info.folder,
+        lora: info.lora.as_deref(),
+        resolution: info.resolution,
+        prompt: &prompts.appearance,
+        settings: &method.personalize,
+        backend: spec.device,
+        out: &spec.out,
+    })?;
+    *prior = Some(GuidancePrior::load_personalized(
+        &info.folder,
+        info.lora.as_deref(),
+        Some(&spec.out.join(&report.lora)),
+        &spec.device.device(),
+    )?);
+    Ok(Some(report))
+}
+
 /// Runs one object removal (see the module docs) and returns what it measured, also
 /// written as `OUT/metrics.json`.
 pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     let device = spec.device;
     setup::check_paths(spec)?;
     let (method_name, prior_spec) = method_and_prior(spec);
-    let method = load_method(&method_name)?;
+    let mut method = load_method(&method_name)?;
+    if let Some(steps) = spec.personalize {
+        method.personalize.steps = steps;
+    }
     let mut config = load_preset(&spec.preset)?;
     if let Some(steps) = spec.steps {
         config.train.steps = steps;
@@ -152,7 +199,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     if let Some(depth) = spec.depth {
         config.train.depth = depth;
     }
-    let prior = load_prior(spec, &method, prior_spec.as_deref())?;
+    let mut prior = load_prior(spec, &method, prior_spec.as_deref())?;
 
     let (scene_dir, mut scene) = setup::load_or_generate(spec)?;
     setup::require_masks(&scene)?;
@@ -174,13 +221,14 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         None
     };
     let prompts = method.resolve_prompts(&SceneCaptions::read(&scene_dir), &spec.prompts);
-    let prior_info = prior.as_ref().map(|p| p.info.clone());
 
     let out = &spec.out;
     std::fs::create_dir_all(out).map_err(|e| InpaintError::Spec {
         field: format!("--out {}", out.display()),
         reason: format!("cannot create the output folder: {e}"),
     })?;
+    let personalized = personalize_prior(spec, &method, &scene, &config, &prompts, &mut prior)?;
+    let prior_info = prior.as_ref().map(|p| p.info.clone());
     let ckpt = out.join("checkpoint.bin");
     let resuming = spec.resume && ckpt.is_file();
     if spec.resume && !resuming {
@@ -275,6 +323,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
             height: o.height,
             seconds: o.seconds,
         }),
+        personalize: personalized,
         samples_per_ray: trainer.config.sampler.samples_per_ray,
         mean_train_evaluations_per_ray: fit.mean_evaluations_per_ray,
         guidance: GuidanceSummary {

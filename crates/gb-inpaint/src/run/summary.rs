@@ -132,6 +132,9 @@ pub struct RunSummary {
     pub mean_train_evaluations_per_ray: f32,
     /// Guidance counts and timings.
     pub guidance: GuidanceSummary,
+    /// The per-scene LoRA, when the method personalises the prior.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub personalize: Option<crate::personalize::PersonalizeReport>,
     /// Number of test views.
     pub test_views: usize,
     /// Means over the test views.

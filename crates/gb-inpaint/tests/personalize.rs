@@ -1,0 +1,194 @@
+//! Per-scene personalisation with the built-in tiny prior and its geometric LoRA on a small
+//! procedural stairs scene: the patches never show the object, training moves only the new
+//! adapters and lowers the inpainting loss on the scene's held-out batches, and a run reuses
+//! its cached LoRA until something it was trained from changes.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use burn::module::Module;
+use burn::store::{bridge, ModuleSnapshot};
+use gb_core::BackendKind;
+use gb_finetune::sample::PairSource;
+use gb_inpaint::personalize::{
+    held_out_loss, new_trainer, personalize, scene_patches, PersonalizeInputs, PersonalizeSettings,
+};
+use gb_inpaint::{GuidancePrior, InpaintError};
+use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
+use gb_nerf::scene::{LoadOptions, Scene, Split};
+
+/// Burn's device RNG (the adapters' init) is process-global: one test at a time.
+static LOCK: Mutex<()> = Mutex::new(());
+
+fn scene(dir: &Path) -> Scene {
+    let opts = ProceduralOptions {
+        name: SceneName::Stairs,
+        seed: 5,
+        width: 48,
+        height: 36,
+        views: 5,
+        test_views: 1,
+        dilate: 1,
+    };
+    procedural::write(&opts, dir).unwrap();
+    gb_nerf::scene::load(dir, &LoadOptions::default())
+        .unwrap()
+        .1
+}
+
+fn tiny() -> (PathBuf, PathBuf) {
+    let dir = gb_diffusion::checkpoint::resolve_prior("tiny").unwrap();
+    let lora = dir.join(gb_inpaint::prior::LORA_FILE_NAME);
+    (dir, lora)
+}
+
+fn inputs<'a>(
+    scene: &'a Scene,
+    prior: &'a Path,
+    lora: &'a Path,
+    settings: &'a PersonalizeSettings,
+    out: &'a Path,
+) -> PersonalizeInputs<'a> {
+    PersonalizeInputs {
+        scene,
+        downscale: 1,
+        crop_margin: 0.25,
+        prior,
+        lora: Some(lora),
+        resolution: 64,
+        prompt: "RGB image, stairs",
+        settings,
+        backend: BackendKind::Flex,
+        out,
+    }
+}
+
+/// Every float parameter of `m` by path.
+fn params<M: Module>(m: &M) -> BTreeMap<String, Vec<f32>> {
+    m.collect(None, None, false)
+        .into_iter()
+        .map(|t| {
+            let name = t.name.clone();
+            let v = bridge::into_data(t)
+                .unwrap()
+                .convert::<f32>()
+                .try_to_vec::<f32>()
+                .unwrap();
+            (name, v)
+        })
+        .collect()
+}
+
+#[test]
+fn patches_avoid_the_masks_and_training_moves_only_the_adapters_and_lowers_the_loss() {
+    let _g = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let (prior, lora) = tiny();
+    let settings = PersonalizeSettings {
+        steps: 25,
+        lr: 3e-3,
+        ..PersonalizeSettings::default()
+    };
+    let out = dir.path().join("run");
+    let i = inputs(&s, &prior, &lora, &settings, &out);
+
+    let patches = scene_patches(&i).unwrap();
+    assert!(patches.len() >= 10, "{} patches", patches.len());
+    let train: Vec<_> = s.split(Split::Train).collect();
+    let side = patches.rects[0].side;
+    assert!((8..=36).contains(&side), "side {side}");
+    for r in &patches.rects {
+        assert_eq!(r.side, side);
+        let view = train[r.view];
+        let w = view.image.width;
+        if let Some(m) = &view.mask {
+            for y in r.y0..r.y0 + side {
+                for x in r.x0..r.x0 + side {
+                    assert!(!m.data[y * w + x], "patch {r:?} shows the object");
+                }
+            }
+        }
+        // the sample is the view's pixels there
+        let sample = patches.load(patches.rects.iter().position(|q| q == r).unwrap());
+        let sample = sample.unwrap();
+        assert_eq!(&sample.rgb[..3], &view.image.get(r.x0, r.y0)[..]);
+        assert_eq!(sample.caption, "RGB image, stairs");
+    }
+
+    let mut trainer = new_trainer(&i).unwrap();
+    let before = params(&trainer.models.trainable);
+    let loss_before = held_out_loss(&trainer, &patches).unwrap();
+    for _ in 0..settings.steps {
+        let step = trainer.train_step(&patches).unwrap();
+        assert!(!step.skipped && step.loss.is_finite(), "{step:?}");
+    }
+    let loss_after = held_out_loss(&trainer, &patches).unwrap();
+    eprintln!("held-out inpainting loss {loss_before:.5} -> {loss_after:.5}");
+    assert!(
+        loss_after < 0.97 * loss_before,
+        "{loss_before} -> {loss_after}"
+    );
+    let after = params(&trainer.models.trainable);
+    let is_factor = |k: &str| k.contains(".lora.");
+    for (k, v) in &before {
+        if !is_factor(k) {
+            assert!(after[k] == *v, "base parameter {k} changed");
+        }
+    }
+    let moved: Vec<&String> = after
+        .keys()
+        .filter(|k| is_factor(k) && before.get(*k) != after.get(*k))
+        .collect();
+    assert!(!moved.is_empty(), "no adapter moved");
+    assert!(moved.iter().all(|k| k.starts_with("unet.")), "{moved:?}");
+}
+
+#[test]
+fn a_run_reuses_its_lora_until_what_it_was_trained_from_changes() {
+    let _g = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let (prior, lora) = tiny();
+    let settings = PersonalizeSettings {
+        steps: 2,
+        ..PersonalizeSettings::default()
+    };
+    let out = dir.path().join("run");
+    let first = personalize(&inputs(&s, &prior, &lora, &settings, &out)).unwrap();
+    assert!(!first.cached);
+    let file = out.join(&first.lora);
+    assert!(file.is_file() && out.join("personalize/personalize.json").is_file());
+    let again = personalize(&inputs(&s, &prior, &lora, &settings, &out)).unwrap();
+    assert!(again.cached);
+    assert_eq!(
+        (again.loss_before, again.loss_after, again.patches),
+        (first.loss_before, first.loss_after, first.patches)
+    );
+    let reseeded = PersonalizeSettings {
+        seed: 1,
+        ..settings.clone()
+    };
+    let other = personalize(&inputs(&s, &prior, &lora, &reseeded, &out)).unwrap();
+    assert!(!other.cached, "another seed must retrain");
+    // the prior loads with both LoRAs merged, and says so
+    let p = GuidancePrior::load_personalized(
+        &prior,
+        Some(&lora),
+        Some(&file),
+        &BackendKind::Flex.device(),
+    )
+    .unwrap();
+    assert_eq!(p.info.personal_lora.as_deref(), Some(file.as_path()));
+    assert!(p.info.lora_unet_weights > 0);
+
+    // a scene without masks has nothing to personalise around
+    let mut unmasked = s.clone();
+    unmasked.views.iter_mut().for_each(|v| v.mask = None);
+    let e = personalize(&inputs(&unmasked, &prior, &lora, &settings, &out)).unwrap_err();
+    assert!(
+        matches!(e, InpaintError::Personalize { .. }) && e.to_string().contains("no masked"),
+        "{e}"
+    );
+}
