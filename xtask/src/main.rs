@@ -45,7 +45,7 @@ enum Command {
     Bench(gb_bench::Args),
     /// Property tests of every file reader (10 000 cases each), report in bench/results.
     Fuzz(cmd::fuzz::Args),
-    /// Generate a procedural object-removal scene (stairs, fence) in the SPIn-NeRF layout.
+    /// Generate a procedural object-removal scene (stairs, fence, alcove) in the SPIn-NeRF layout.
     Scene(cmd::scene::Args),
     /// Summarise a scene folder: views per split, resolution, masks, near/far, warnings.
     SceneInfo(cmd::scene_info::Args),

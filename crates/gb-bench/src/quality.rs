@@ -1,7 +1,7 @@
 //! `cargo xtask bench quality`: the object-removal quality of every method on the procedural
 //! scenes with ground truth, written to `bench/results/quality-<scene>-<timestamp>.json`.
 //!
-//! For each scene of `--scenes` (default `stairs,fence`, generated with seed 0) it runs
+//! For each scene of `--scenes` (default `stairs,fence,alcove`, generated with seed 0) it runs
 //! the method grid of `cargo xtask ablate` (`gb_inpaint::grid`, in this process) on `--methods` (default: the baselines
 //! table, none first, plus the ablation rows) without the w3 sweep, into `--work/<scene>/`,
 //! and records the baseline and ablation tables with the machine. The reference is the
@@ -27,8 +27,8 @@ use serde_json::{json, Value};
 /// Arguments of `cargo xtask bench quality`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Comma-separated procedural scenes (stairs, fence).
-    #[arg(long, value_delimiter = ',', default_value = "stairs,fence")]
+    /// Comma-separated procedural scenes (stairs, fence, alcove).
+    #[arg(long, value_delimiter = ',', default_value = "stairs,fence,alcove")]
     pub scenes: Vec<SceneName>,
     /// The grid: methods (default: the whole grid, without the w3 sweep), preset, prior,
     /// steps, device.

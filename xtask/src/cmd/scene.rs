@@ -8,7 +8,7 @@ use std::path::PathBuf;
 /// Arguments of `cargo xtask scene`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scene: stairs or fence.
+    /// Scene: stairs, fence or alcove.
     #[arg(long)]
     name: SceneName,
     /// Output folder (absent, empty, or an earlier generated scene).

@@ -1,5 +1,7 @@
-//! The built-in scenes: `stairs` (a textured staircase with an object standing on a step)
-//! and `fence` (a periodic picket fence in front of a brick wall, with an object in front).
+//! The built-in scenes: `stairs` (a textured staircase with an object standing on a step),
+//! `fence` (a periodic picket fence in front of a brick wall, with an object in front) and
+//! `alcove` (an object standing in a recess of a wall, so that most of what it hides, the
+//! recess's tiled back, is seen by no view).
 //! World axes: y up; the cameras look roughly along -z. Units: metres, loosely.
 
 use super::geometry::{Geometry, V3};
@@ -15,17 +17,20 @@ pub enum SceneName {
     Stairs,
     /// A periodic fence in front of a wall, with an object (a ball on a crate) in front.
     Fence,
+    /// A plastered wall with a recess, an object (a vase) standing in it.
+    Alcove,
 }
 
 impl SceneName {
     /// Every scene.
-    pub const ALL: [SceneName; 2] = [SceneName::Stairs, SceneName::Fence];
+    pub const ALL: [SceneName; 3] = [SceneName::Stairs, SceneName::Fence, SceneName::Alcove];
 
     /// Its command-line name.
     pub fn as_str(&self) -> &'static str {
         match self {
             SceneName::Stairs => "stairs",
             SceneName::Fence => "fence",
+            SceneName::Alcove => "alcove",
         }
     }
 }
@@ -42,8 +47,9 @@ impl std::str::FromStr for SceneName {
         match s.to_ascii_lowercase().as_str() {
             "stairs" => Ok(SceneName::Stairs),
             "fence" => Ok(SceneName::Fence),
+            "alcove" => Ok(SceneName::Alcove),
             other => Err(format!(
-                "unknown procedural scene '{other}' (expected stairs or fence)"
+                "unknown procedural scene '{other}' (expected stairs, fence or alcove)"
             )),
         }
     }
@@ -109,6 +115,7 @@ pub fn build(name: SceneName, seed: u64) -> SceneSpec {
     match name {
         SceneName::Stairs => stairs(&mut rng, s32),
         SceneName::Fence => fence(&mut rng, s32),
+        SceneName::Alcove => alcove(&mut rng, s32),
     }
 }
 
@@ -301,5 +308,106 @@ fn fence(rng: &mut ChaCha8Rng, s32: impl Fn(&mut ChaCha8Rng) -> u32) -> SceneSpe
         rig: Rig { target: [0.0, 0.7, -1.6], radius: 4.0, azimuth_deg: (-15.0, 15.0), elevation_deg: 8.0, hfov_deg: 55.0 },
         caption_with_object: format!("a white picket fence in front of a brick wall on a lawn, with a {cname} ball on a wooden crate in front"),
         caption_without_object: "a white picket fence in front of a brick wall on a lawn".into(),
+    }
+}
+
+fn alcove(rng: &mut ChaCha8Rng, s32: impl Fn(&mut ChaCha8Rng) -> u32) -> SceneSpec {
+    let floor = shape(
+        Geometry::Plane {
+            normal: [0.0, 1.0, 0.0],
+            offset: 0.0,
+        },
+        Texture::Checker {
+            a: jitter(rng, [0.62, 0.56, 0.48], 0.05),
+            b: jitter(rng, [0.40, 0.36, 0.30], 0.05),
+            cell: 0.4,
+        },
+    );
+    let plaster = Texture::Noise {
+        a: jitter(rng, [0.86, 0.82, 0.72], 0.04),
+        b: jitter(rng, [0.74, 0.70, 0.60], 0.04),
+        freq: 4.0,
+        seed: s32(rng),
+    };
+    // the wall's face at z = -2, the recess (x in [-w, w], y in [sill, lintel]) `depth` deep;
+    // the wall is built of four blocks around the opening, whose inner faces are the
+    // recess's sides, floor and ceiling
+    let (zw, depth) = (-2.0, 0.7);
+    let w = rng.random_range(0.55..0.7);
+    let (sill, lintel) = (0.5, 1.6);
+    let zb = zw - depth;
+    let block = |min: V3, max: V3| shape(Geometry::Cuboid { min, max }, plaster);
+    let mut shapes = vec![
+        floor,
+        block([-5.0, 0.0, zb], [-w, 3.5, zw]),
+        block([w, 0.0, zb], [5.0, 3.5, zw]),
+        block([-w, lintel, zb], [w, 3.5, zw]),
+        block([-w, 0.0, zb], [w, sill, zw]),
+    ];
+    // the recess's back: coloured tiles, the surface the object hides
+    let (tname, tile) = PALETTE[rng.random_range(0..PALETTE.len())];
+    shapes.push(shape(
+        Geometry::Cuboid {
+            min: [-w, sill, zb - 0.1],
+            max: [w, lintel, zb],
+        },
+        Texture::Bricks {
+            brick: jitter(rng, tile, 0.08),
+            mortar: [0.90, 0.89, 0.85],
+            width: 0.2,
+            height: 0.2,
+            seed: s32(rng),
+        },
+    ));
+    // the object: a vase standing on the recess's floor, in front of its back
+    let (cname, color) = loop {
+        let c = PALETTE[rng.random_range(0..PALETTE.len())];
+        if c.0 != tname {
+            break c;
+        }
+    };
+    let x = rng.random_range(-0.08..0.08);
+    let z = zb + 0.35;
+    shapes.push(Shape {
+        geometry: Geometry::Cylinder {
+            x,
+            z,
+            radius: 0.26,
+            y0: sill,
+            y1: sill + 0.6,
+        },
+        texture: Texture::Noise {
+            a: color,
+            b: jitter(rng, color, 0.15),
+            freq: 9.0,
+            seed: s32(rng),
+        },
+        object: true,
+    });
+    shapes.push(Shape {
+        geometry: Geometry::Sphere {
+            center: [x, sill + 0.76, z],
+            radius: 0.24,
+        },
+        texture: Texture::Checker {
+            a: color,
+            b: [0.95, 0.95, 0.92],
+            cell: 0.08,
+        },
+        object: true,
+    });
+    SceneSpec {
+        world: World::new(shapes),
+        rig: Rig {
+            target: [0.0, 1.05, zw - 0.3],
+            radius: 3.6,
+            azimuth_deg: (-16.0, 16.0),
+            elevation_deg: 10.0,
+            hfov_deg: 48.0,
+        },
+        caption_with_object: format!(
+            "a plastered wall with a recess tiled in {tname}, with a {cname} vase standing in it"
+        ),
+        caption_without_object: format!("a plastered wall with a recess tiled in {tname}"),
     }
 }
