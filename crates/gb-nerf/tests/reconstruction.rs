@@ -28,6 +28,7 @@ fn config(steps: usize, occupancy: bool) -> NerfConfig {
                 decay: 0.9,
                 opacity_threshold: 0.01,
                 cells_per_update: 0,
+                early_stop_eps: 1e-4,
             }),
         },
         train: TrainSettings {
@@ -109,6 +110,37 @@ fn training_fits_the_plane_depth_and_normals() {
     // the occupancy grid was updated and never evaluates more than the dense budget
     assert!(grid.density.iter().any(|d| *d > 0.0));
     assert!(render.evaluations_per_ray <= 32.0);
+    // early ray termination: the samples behind where each ray runs out of light are not
+    // evaluated, and the colour moves by at most eps
+    let opaque = render.opacity.iter().filter(|a| **a > 0.9).count();
+    let mut dense = None;
+    for eps in [0.0f32, 0.1] {
+        trainer.occupancy.as_mut().unwrap().early_stop_eps = eps;
+        let r = trainer.render(&test.camera).unwrap();
+        let Some((rgb, evals)) = dense.take() else {
+            dense = Some((r.rgb.data.clone(), r.evaluations_per_ray));
+            continue;
+        };
+        let rgb: Vec<f32> = rgb;
+        let moved = rgb
+            .iter()
+            .zip(&r.rgb.data)
+            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+        eprintln!(
+            "early stop at {eps}: {:.1} -> {:.1} evaluations per ray ({opaque} of {} rays \
+             over 0.9 opacity), colour moved by at most {moved:.2e}",
+            evals,
+            r.evaluations_per_ray,
+            render.opacity.len()
+        );
+        assert!(moved <= eps + 1e-5, "{moved}");
+        // measured: 31.7 -> 31.0 (84 of 432 rays over 0.9 opacity after 200 steps)
+        assert!(
+            r.evaluations_per_ray < evals - 0.5,
+            "{evals} -> {}",
+            r.evaluations_per_ray
+        );
+    }
 }
 
 #[test]

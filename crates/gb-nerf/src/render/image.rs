@@ -8,9 +8,9 @@ use serde::{Deserialize, Serialize};
 
 use super::normals::{depth_to_normals, Intrinsics, PlaneFitConfig};
 use super::rays::{all_pixels, camera_rays};
-use super::{density_gradient_normals, render_samples, Background};
+use super::{density_gradient_normals, render_samples, sample_and_prune, Background};
 use crate::field::NerfField;
-use crate::sampler::{sample_rays, OccupancyGrid, SceneSpace};
+use crate::sampler::{OccupancyGrid, SceneSpace};
 use crate::scene::Camera;
 
 /// Where normals come from.
@@ -81,7 +81,8 @@ pub fn render_image(
     let mut evals = 0usize;
     for chunk in pixels.chunks(settings.chunk.max(1)) {
         let rays = camera_rays(camera, chunk, settings.space, settings.near, settings.far);
-        let samples = sample_rays::<rand_chacha::ChaCha8Rng>(
+        let samples = sample_and_prune::<rand_chacha::ChaCha8Rng>(
+            &field,
             &rays,
             settings.space,
             settings.samples_per_ray,

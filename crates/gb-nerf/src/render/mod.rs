@@ -4,6 +4,7 @@
 pub mod image;
 pub mod normals;
 pub mod rays;
+pub mod termination;
 pub mod volume;
 
 use burn::tensor::{Int, Tensor, TensorData};
@@ -75,8 +76,27 @@ pub fn render_samples(
     composite(sigma, rgb, t, delta, background)
 }
 
-/// Samples `rays` (jittered when `rng` is given, skipping empty cells of `occupancy`) and
-/// renders them. The outputs keep the autodiff graph of `field`.
+/// The samples of `rays` that the field evaluates: stratified (jittered when `rng` is
+/// given), without the empty cells of `occupancy` and, with its `early_stop_eps`, without
+/// the samples behind where each ray's transmittance runs out ([`termination`]).
+pub fn sample_and_prune<R: Rng>(
+    field: &NerfField,
+    rays: &RayBatch,
+    space: &SceneSpace,
+    samples_per_ray: usize,
+    occupancy: Option<&OccupancyGrid>,
+    rng: Option<&mut R>,
+) -> SampleSet {
+    let samples = sample_rays(rays, space, samples_per_ray, occupancy, rng);
+    match occupancy {
+        Some(grid) => termination::prune_occluded(field, samples, grid.early_stop_eps),
+        None => samples,
+    }
+}
+
+/// Samples `rays` (jittered when `rng` is given, skipping empty cells of `occupancy` and,
+/// with its `early_stop_eps`, the samples behind where each ray's transmittance runs out:
+/// [`termination`]) and renders them. The outputs keep the autodiff graph of `field`.
 pub fn render_rays<R: Rng>(
     field: &NerfField,
     space: &SceneSpace,
@@ -86,7 +106,7 @@ pub fn render_rays<R: Rng>(
     background: Background,
     rng: Option<&mut R>,
 ) -> (VolumeOutput, SampleSet) {
-    let samples = sample_rays(rays, space, samples_per_ray, occupancy, rng);
+    let samples = sample_and_prune(field, rays, space, samples_per_ray, occupancy, rng);
     let out = render_samples(field, &samples, background);
     (out, samples)
 }

@@ -28,6 +28,12 @@ pub struct OccupancyConfig {
     pub opacity_threshold: f32,
     /// Cells refreshed per update (0: all).
     pub cells_per_update: usize,
+    /// Transmittance below which a ray stops being evaluated (early ray termination,
+    /// nerfacc's `early_stop_eps`, whose default is 1e-4; 0: off, the default). See
+    /// [`crate::render::termination`]: no preset enables it, because within their step
+    /// counts the surfaces stay partly transparent and it skips almost nothing.
+    #[serde(default)]
+    pub early_stop_eps: f32,
 }
 
 /// The grid (see the module docs).
@@ -41,10 +47,12 @@ pub struct OccupancyGrid {
     pub occupied: Vec<bool>,
     /// Density above which a cell is occupied.
     pub density_threshold: f32,
+    /// Transmittance below which a ray stops being evaluated (0: off).
+    pub early_stop_eps: f32,
 }
 
 impl OccupancyGrid {
-    /// A grid with every cell occupied.
+    /// A grid with every cell occupied, without early ray termination.
     pub fn new(resolution: usize, density_threshold: f32) -> Self {
         let n = resolution.max(1).pow(3);
         Self {
@@ -52,6 +60,7 @@ impl OccupancyGrid {
             density: vec![0.0; n],
             occupied: vec![true; n],
             density_threshold,
+            early_stop_eps: 0.0,
         }
     }
 

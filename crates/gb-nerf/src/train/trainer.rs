@@ -142,10 +142,13 @@ impl Trainer {
         };
         if let Some(occ) = trainer.config.sampler.occupancy.clone() {
             let typical = trainer.typical_delta();
-            trainer.occupancy = Some(OccupancyGrid::new(
-                occ.resolution,
-                OccupancyGrid::threshold_for(occ.opacity_threshold, typical),
-            ));
+            trainer.occupancy = Some(OccupancyGrid {
+                early_stop_eps: occ.early_stop_eps,
+                ..OccupancyGrid::new(
+                    occ.resolution,
+                    OccupancyGrid::threshold_for(occ.opacity_threshold, typical),
+                )
+            });
         }
         Ok(trainer)
     }
