@@ -192,3 +192,47 @@ fn a_run_reuses_its_lora_until_what_it_was_trained_from_changes() {
         "{e}"
     );
 }
+
+#[test]
+fn a_large_object_gets_smaller_patches_rather_than_none() {
+    use gb_inpaint::personalize::patches::crop_side;
+    use gb_inpaint::personalize::{MIN_PATCHES, MIN_PATCH_SIDE};
+    let dir = tempfile::tempdir().unwrap();
+    let opts = ProceduralOptions {
+        name: SceneName::Alcove,
+        seed: 5,
+        width: 64,
+        height: 48,
+        views: 6,
+        test_views: 1,
+        dilate: 1,
+    };
+    procedural::write(&opts, dir.path()).unwrap();
+    let s = gb_nerf::scene::load(dir.path(), &LoadOptions::default())
+        .unwrap()
+        .1;
+    let (prior, lora) = tiny();
+    let settings = PersonalizeSettings::default();
+    let out = dir.path().join("run");
+    let i = inputs(&s, &prior, &lora, &settings, &out);
+    let data =
+        gb_nerf::train::data::TrainData::from_scene(&s, 1, gb_nerf::train::DepthSupervision::None)
+            .unwrap();
+    let full = crop_side(&data.views, 0.25).unwrap();
+    let at_full = gb_inpaint::personalize::ScenePatches::new(&data.views, full, "x");
+    let patches = scene_patches(&i).unwrap();
+    let side = patches.rects[0].side;
+    eprintln!(
+        "crop side {full}: {} patches; shrunk to {side}: {}",
+        at_full.len(),
+        patches.len()
+    );
+    assert!(at_full.len() < MIN_PATCHES, "{}", at_full.len());
+    assert!(side < full && (patches.len() >= MIN_PATCHES || side == MIN_PATCH_SIDE));
+    for r in &patches.rects {
+        let m = data.views[r.view].mask.as_ref().unwrap();
+        for y in r.y0..r.y0 + side {
+            assert!((r.x0..r.x0 + side).all(|x| !m.data[y * m.width + x]));
+        }
+    }
+}

@@ -5,7 +5,8 @@
 //!
 //! - **Data** ([`patches`]): square patches of the training views at the guidance crop's size
 //!   that touch no object mask (the object is never shown to the prior), captioned with the
-//!   run's appearance prompt. RGB only: a scene has no ground-truth normal maps.
+//!   run's appearance prompt; when fewer than [`MIN_PATCHES`] fit (a large object), the side
+//!   shrinks by a quarter at a time. RGB only: a scene has no ground-truth normal maps.
 //! - **Training**: a fresh LoRA (`rank`, `alpha`) on the U-Net attention projections of the
 //!   prior with its geometric LoRA (if the method uses one) merged, trained for `steps` AdamW
 //!   steps on the run's backend. Every other weight is frozen.
@@ -43,6 +44,10 @@ pub const EVAL_BATCHES: usize = 8;
 /// The step index the held-out batches are drawn at: far beyond any run, so that their
 /// holes, noise and timesteps are never trained on.
 const EVAL_STEP: usize = 1 << 40;
+/// Fewest patches personalisation trains on before it shrinks them.
+pub const MIN_PATCHES: usize = 32;
+/// The smallest patch side, training pixels.
+pub const MIN_PATCH_SIDE: usize = 16;
 /// The cache's folder in the run folder.
 pub const FOLDER: &str = "personalize";
 
@@ -207,7 +212,14 @@ pub fn scene_patches(i: &PersonalizeInputs) -> Result<ScenePatches, InpaintError
             reason: format!("scene '{}' has no masked training view", i.scene.name),
         }
     })?;
-    let source = ScenePatches::new(&data.views, side, i.prompt);
+    // a large object leaves few mask-free squares of the crop's size: shrink them until
+    // there are enough (the prior then sees the scene at a somewhat finer scale)
+    let mut side = side;
+    let mut source = ScenePatches::new(&data.views, side, i.prompt);
+    while source.rects.len() < MIN_PATCHES && side > MIN_PATCH_SIDE {
+        side = (side * 3 / 4).max(MIN_PATCH_SIDE);
+        source = ScenePatches::new(&data.views, side, i.prompt);
+    }
     if source.rects.is_empty() {
         return Err(InpaintError::Personalize {
             reason: format!(
