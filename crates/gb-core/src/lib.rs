@@ -24,5 +24,5 @@ pub use backend::{heavy_test_backends, test_backends, BackendKind};
 pub use image_io::{read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage};
 pub use indexing::gather_rows;
 pub use npy_guard::check_npy_header;
-pub use tensor_values::{f32_values, TensorValuesError};
+pub use tensor_values::{device_reads, f32_values, read_f32, TensorValuesError};
 pub use testdata::test_data_dir;

@@ -1,7 +1,31 @@
 //! Reading a tensor's values back to the host: a dtype surprise is an error that says what
 //! was expected, never an empty vector that silently stands in for the values.
+//!
+//! Each read waits for the device to finish what it was given, so the hot loops read through
+//! [`read_f32`], which counts the reads made on the calling thread ([`device_reads`]): tests
+//! hold a training step to its budget of reads.
 
-use burn::tensor::TensorData;
+use std::cell::Cell;
+
+use burn::tensor::{Tensor, TensorData};
+
+thread_local! {
+    static READS: Cell<usize> = const { Cell::new(0) };
+}
+
+/// Device-to-host reads made through [`read_f32`] on this thread so far.
+pub fn device_reads() -> usize {
+    READS.with(Cell::get)
+}
+
+/// Reads `tensor` back to the host as `f32` values: one device read, counted.
+pub fn read_f32<const D: usize>(
+    tensor: Tensor<D>,
+    what: &'static str,
+) -> Result<Vec<f32>, TensorValuesError> {
+    READS.with(|r| r.set(r.get() + 1));
+    f32_values(tensor.into_data(), what)
+}
 
 /// A tensor's values were not of the expected element type.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

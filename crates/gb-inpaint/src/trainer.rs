@@ -837,21 +837,29 @@ impl GuidedTrainer {
         if self.inject_nan_from_step.is_some_and(|s| step >= s) {
             loss = loss.add_scalar(f32::NAN);
         }
-        let recon_value: f32 = recon.loss.detach().into_scalar();
-        let loss_value: f32 = loss.clone().detach().into_scalar();
+        // one read for the step's own values (the guidance terms read their diagnostics)
+        let values = gb_core::read_f32(
+            Tensor::cat(
+                vec![recon.loss.detach(), loss.clone().detach(), recon.rgb_mse],
+                0,
+            ),
+            "step losses",
+        )
+        .map_err(gb_nerf::train::NerfError::from)?;
+        let (recon_value, loss_value, rgb_mse) = (values[0], values[1], values[2]);
         let finite = |v: f32| v.is_finite().then_some(v as f64);
         let mut record = StepRecord {
             step,
             loss: finite(loss_value),
             recon_loss: finite(recon_value),
-            psnr: psnr_from_mse(recon.rgb_mse as f64),
+            psnr: psnr_from_mse(rgb_mse as f64),
             lr: self.nerf.config.lr_at(step),
             skipped: false,
             evaluations_per_ray: recon.evaluations_per_ray,
             seconds: 0.0,
             guidance: records,
         };
-        if self.nerf.apply_loss(loss)? {
+        if self.nerf.apply_loss_valued(loss, loss_value)? {
             self.nan_streak = 0;
         } else {
             self.nan_streak += 1;

@@ -28,7 +28,7 @@ fn config(steps: usize, occupancy: bool) -> NerfConfig {
                 decay: 0.9,
                 opacity_threshold: 0.01,
                 cells_per_update: 0,
-                early_stop_eps: 1e-4,
+                early_stop_eps: 0.0,
             }),
         },
         train: TrainSettings {
@@ -314,4 +314,28 @@ fn sparse_points_supervise_the_depth() {
     // measured: none 0.183, sparse 0.128, dense 0.116
     assert!(sparse < 0.8 * none, "sparse {sparse} vs none {none}");
     assert!(sparse < 1.25 * dense, "sparse {sparse} vs dense {dense}");
+}
+
+#[test]
+fn a_training_step_reads_the_device_once() {
+    let _guard = SEEDED_INIT.lock().unwrap_or_else(|e| e.into_inner());
+    let scene = common::plane_scene(3, 12, 10);
+    let mut cfg = config(30, true);
+    let occ = cfg.sampler.occupancy.as_mut().unwrap();
+    (occ.warmup_steps, occ.update_every) = (4, 4);
+    let mut trainer = Trainer::new(&scene, cfg, BackendKind::Flex).unwrap();
+    let mut per_step = Vec::new();
+    for _ in 0..8 {
+        let before = gb_core::device_reads();
+        trainer.train_step().unwrap();
+        per_step.push(gb_core::device_reads() - before);
+    }
+    // one read for the loss and the RGB MSE; the occupancy grid reads its densities on its
+    // update steps (after steps 4 and 8: 16^3 cells in one chunk)
+    assert_eq!(per_step, [1, 1, 1, 2, 1, 1, 1, 2]);
+    // with early termination, the density pass adds one read per step
+    trainer.occupancy.as_mut().unwrap().early_stop_eps = 1e-4;
+    let before = gb_core::device_reads();
+    trainer.train_step().unwrap();
+    assert_eq!(gb_core::device_reads() - before, 2);
 }

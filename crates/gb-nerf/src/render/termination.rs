@@ -34,7 +34,7 @@ fn densities(field: &NerfField, points: &[[f32; 3]]) -> Option<Vec<f32>> {
     let mut out = Vec::with_capacity(points.len());
     for chunk in points.chunks(FIELD_CHUNK_SAMPLES) {
         let sigma: Tensor<1> = field.density(chunk).detach();
-        out.extend(gb_core::f32_values(sigma.into_data(), "densities").ok()?);
+        out.extend(gb_core::read_f32(sigma, "densities").ok()?);
     }
     Some(out)
 }

@@ -7,7 +7,7 @@
 //! `occupied = d > density_threshold`, where the threshold is the density at which a
 //! typical sample interval reaches `opacity_threshold` opacity.
 
-use gb_core::{f32_values, TensorValuesError};
+use gb_core::{read_f32, TensorValuesError};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
@@ -115,7 +115,7 @@ impl OccupancyGrid {
                     idx.map(|i| (i as f32 + rng.random::<f32>()) / r as f32)
                 })
                 .collect();
-            let sigma = f32_values(field.density(&pts).into_data(), "occupancy-grid densities")?;
+            let sigma = read_f32(field.density(&pts), "occupancy-grid densities")?;
             for (&c, s) in chunk.iter().zip(sigma) {
                 let s = if s.is_finite() { s } else { f32::MAX };
                 self.density[c] = self.density[c].max(s);

@@ -9,7 +9,7 @@ use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::store::ModuleRecord;
 use burn::tensor::{Bytes, Tensor, TensorData};
-use gb_core::BackendKind;
+use gb_core::{read_f32, BackendKind};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -36,12 +36,13 @@ pub struct StepStats {
     pub evaluations_per_ray: f32,
 }
 
-/// The reconstruction loss of one ray batch ([`Trainer::reconstruction_loss`]).
+/// The reconstruction loss of one ray batch ([`Trainer::reconstruction_loss`]). Nothing in
+/// it has been read from the device: a step reads once, all its values together.
 pub struct ReconstructionLoss {
     /// RGB MSE plus the weighted disparity loss, with its graph.
     pub loss: Tensor<1>,
-    /// The RGB MSE alone.
-    pub rgb_mse: f32,
+    /// The RGB MSE alone `[1]`, without a graph.
+    pub rgb_mse: Tensor<1>,
     /// Field evaluations per ray of the batch.
     pub evaluations_per_ray: f32,
 }
@@ -258,7 +259,7 @@ impl Trainer {
         }
         ReconstructionLoss {
             loss,
-            rgb_mse: rgb_loss.detach().into_scalar(),
+            rgb_mse: rgb_loss.detach(),
             evaluations_per_ray: samples.evaluations_per_ray(),
         }
     }
@@ -268,7 +269,13 @@ impl Trainer {
     /// step counter advances either way; a non-finite `loss` skips the update and returns
     /// `false`. Errors when the occupancy grid cannot read the field's densities.
     pub fn apply_loss(&mut self, loss: Tensor<1>) -> Result<bool, NerfError> {
-        let value: f32 = loss.clone().detach().into_scalar();
+        let value = read_f32(loss.clone().detach(), "loss")?[0];
+        self.apply_loss_valued(loss, value)
+    }
+
+    /// [`Self::apply_loss`] with the loss's value already read (`value`), so that a step
+    /// reads once for everything it logs.
+    pub fn apply_loss_valued(&mut self, loss: Tensor<1>, value: f32) -> Result<bool, NerfError> {
         let lr = self.config.lr_at(self.step);
         self.step += 1;
         if !value.is_finite() {
@@ -280,14 +287,20 @@ impl Trainer {
         Ok(true)
     }
 
-    /// One optimisation step ([`Self::reconstruction_loss`] then [`Self::apply_loss`]).
+    /// One optimisation step ([`Self::reconstruction_loss`] then [`Self::apply_loss`]), with
+    /// one device read (loss and RGB MSE together), plus the occupancy grid's on its update
+    /// steps.
     pub fn train_step(&mut self) -> Result<StepStats, NerfError> {
         let r = self.reconstruction_loss();
-        let loss_value: f32 = r.loss.clone().detach().into_scalar();
-        self.apply_loss(r.loss)?;
+        let values = read_f32(
+            Tensor::cat(vec![r.loss.clone().detach(), r.rgb_mse], 0),
+            "loss and RGB MSE",
+        )?;
+        let (loss_value, rgb_mse) = (values[0], values[1]);
+        self.apply_loss_valued(r.loss, loss_value)?;
         Ok(StepStats {
             loss: loss_value as f64,
-            psnr: psnr_from_mse(r.rgb_mse as f64),
+            psnr: psnr_from_mse(rgb_mse as f64),
             evaluations_per_ray: r.evaluations_per_ray,
         })
     }
