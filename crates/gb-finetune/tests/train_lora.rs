@@ -2,12 +2,10 @@
 //! goes down, only the LoRA factors move, a written LoRA reloads to the same outputs, a
 //! resumed run equals an uninterrupted one, and a full run writes a loadable folder.
 
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Mutex;
 
 use burn::module::Module;
-use burn::store::{bridge, ModuleSnapshot};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use gb_core::BackendKind;
@@ -55,21 +53,7 @@ fn device() -> (Device, Device) {
     (k.autodiff_device(), k.device())
 }
 
-/// Every float parameter of `m` by path.
-fn params<M: Module>(m: &M) -> BTreeMap<String, Vec<f32>> {
-    m.collect(None, None, false)
-        .into_iter()
-        .map(|t| {
-            let name = t.name.clone();
-            let v = bridge::into_data(t)
-                .unwrap()
-                .convert::<f32>()
-                .try_to_vec::<f32>()
-                .unwrap();
-            (name, v)
-        })
-        .collect()
-}
+use gb_finetune::train::models::parameter_values as params;
 
 fn is_factor(path: &str) -> bool {
     path.contains(".lora.") || path.contains(".conv_lora.")

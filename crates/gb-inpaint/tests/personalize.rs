@@ -3,12 +3,9 @@
 //! adapters and lowers the inpainting loss on the scene's held-out batches, and a run reuses
 //! its cached LoRA until something it was trained from changes.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-use burn::module::Module;
-use burn::store::{bridge, ModuleSnapshot};
 use gb_core::BackendKind;
 use gb_finetune::sample::PairSource;
 use gb_inpaint::personalize::{
@@ -64,21 +61,7 @@ fn inputs<'a>(
     }
 }
 
-/// Every float parameter of `m` by path.
-fn params<M: Module>(m: &M) -> BTreeMap<String, Vec<f32>> {
-    m.collect(None, None, false)
-        .into_iter()
-        .map(|t| {
-            let name = t.name.clone();
-            let v = bridge::into_data(t)
-                .unwrap()
-                .convert::<f32>()
-                .try_to_vec::<f32>()
-                .unwrap();
-            (name, v)
-        })
-        .collect()
-}
+use gb_finetune::train::models::parameter_values as params;
 
 #[test]
 fn patches_avoid_the_masks_and_training_moves_only_the_adapters_and_lowers_the_loss() {

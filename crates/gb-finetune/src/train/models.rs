@@ -19,6 +19,20 @@ use gb_diffusion::tokenizer::ClipTokenizer;
 
 use crate::FinetuneError;
 
+/// Every float parameter of `m` by its path (LoRA factors included: their paths contain
+/// `.lora.`), as `f32` values: what a run compares to show which weights moved.
+pub fn parameter_values<M: Module>(m: &M) -> std::collections::BTreeMap<String, Vec<f32>> {
+    use burn::store::{bridge, ModuleSnapshot};
+    m.collect(None, None, false)
+        .into_iter()
+        .filter_map(|t| {
+            let name = t.name.clone();
+            let data = bridge::into_data(t).ok()?.convert::<f32>();
+            Some((name, data.try_to_vec::<f32>().ok()?))
+        })
+        .collect()
+}
+
 /// The trainable pair: a U-Net and a text encoder in one module, so that one optimiser,
 /// one record and one gradient clip cover both.
 #[derive(Module, Debug)]

@@ -100,6 +100,50 @@ fn shape(geometry: Geometry, texture: Texture) -> Shape {
     }
 }
 
+/// The object of `stairs` and `alcove`: a noise-textured cylinder (`body`: radius, height)
+/// standing at `base` (x, y, z), topped by a checkered sphere (`head`: centre height above
+/// the base, radius), both in `color`.
+fn vase(
+    rng: &mut ChaCha8Rng,
+    s32: &impl Fn(&mut ChaCha8Rng) -> u32,
+    color: Rgb,
+    [x, y, z]: V3,
+    (radius, height): (f64, f64),
+    (head_y, head_radius): (f64, f64),
+) -> [Shape; 2] {
+    let body = Texture::Noise {
+        a: color,
+        b: jitter(rng, color, 0.15),
+        freq: 9.0,
+        seed: s32(rng),
+    };
+    [
+        Shape {
+            geometry: Geometry::Cylinder {
+                x,
+                z,
+                radius,
+                y0: y,
+                y1: y + height,
+            },
+            texture: body,
+            object: true,
+        },
+        Shape {
+            geometry: Geometry::Sphere {
+                center: [x, y + head_y, z],
+                radius: head_radius,
+            },
+            texture: Texture::Checker {
+                a: color,
+                b: [0.95, 0.95, 0.92],
+                cell: 0.08,
+            },
+            object: true,
+        },
+    ]
+}
+
 fn jitter(rng: &mut ChaCha8Rng, c: Rgb, amount: f64) -> Rgb {
     let mut out = c;
     for v in &mut out {
@@ -169,35 +213,14 @@ fn stairs(rng: &mut ChaCha8Rng, s32: impl Fn(&mut ChaCha8Rng) -> u32) -> SceneSp
     let x = rng.random_range(-0.35..0.35);
     let z = -0.25 + rng.random_range(-0.05..0.05);
     let top = 3.0 * rise;
-    let body = Texture::Noise {
-        a: color,
-        b: jitter(rng, color, 0.15),
-        freq: 9.0,
-        seed: s32(rng),
-    };
-    shapes.push(Shape {
-        geometry: Geometry::Cylinder {
-            x,
-            z,
-            radius: 0.2,
-            y0: top,
-            y1: top + 0.45,
-        },
-        texture: body,
-        object: true,
-    });
-    shapes.push(Shape {
-        geometry: Geometry::Sphere {
-            center: [x, top + 0.62, z],
-            radius: 0.2,
-        },
-        texture: Texture::Checker {
-            a: color,
-            b: [0.95, 0.95, 0.92],
-            cell: 0.08,
-        },
-        object: true,
-    });
+    shapes.extend(vase(
+        rng,
+        &s32,
+        color,
+        [x, top, z],
+        (0.2, 0.45),
+        (0.62, 0.2),
+    ));
     SceneSpec {
         world: World::new(shapes),
         rig: Rig {
@@ -368,34 +391,14 @@ fn alcove(rng: &mut ChaCha8Rng, s32: impl Fn(&mut ChaCha8Rng) -> u32) -> SceneSp
     };
     let x = rng.random_range(-0.08..0.08);
     let z = zb + 0.35;
-    shapes.push(Shape {
-        geometry: Geometry::Cylinder {
-            x,
-            z,
-            radius: 0.26,
-            y0: sill,
-            y1: sill + 0.6,
-        },
-        texture: Texture::Noise {
-            a: color,
-            b: jitter(rng, color, 0.15),
-            freq: 9.0,
-            seed: s32(rng),
-        },
-        object: true,
-    });
-    shapes.push(Shape {
-        geometry: Geometry::Sphere {
-            center: [x, sill + 0.76, z],
-            radius: 0.24,
-        },
-        texture: Texture::Checker {
-            a: color,
-            b: [0.95, 0.95, 0.92],
-            cell: 0.08,
-        },
-        object: true,
-    });
+    shapes.extend(vase(
+        rng,
+        &s32,
+        color,
+        [x, sill, z],
+        (0.26, 0.6),
+        (0.76, 0.24),
+    ));
     SceneSpec {
         world: World::new(shapes),
         rig: Rig {
