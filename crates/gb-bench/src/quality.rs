@@ -41,6 +41,11 @@ pub struct Args {
     /// Folder of the runs.
     #[arg(long, default_value = "out/bench-quality")]
     pub work: PathBuf,
+    /// Reuse the runs of `--work` that finished (their `metrics.json` and `cell-time.json`
+    /// exist) instead of resuming each one (which renders and scores it again): for a job
+    /// cut short, run again with the same flags.
+    #[arg(long)]
+    pub reuse_finished: bool,
     /// Output folder of the JSON.
     #[arg(long, default_value = "bench/results")]
     pub out: PathBuf,
@@ -202,8 +207,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 Some(&[]),
                 &runs,
             )
-            .and_then(|g| g.write(&runs))
-            .and_then(|_| grid::run_all(&runs))
+            .and_then(|g| g.write(&runs).map(|_| g))
+            .and_then(|g| {
+                for (i, cell) in g.cells.iter().enumerate() {
+                    let dir = runs.join(&cell.dir);
+                    let finished = dir.join("metrics.json").is_file()
+                        && dir.join(grid::CELL_TIME_FILE).is_file()
+                        && !dir.join(grid::CELL_ERROR_FILE).is_file();
+                    if args.reuse_finished && finished {
+                        tracing::info!(cell = %dir.display(), "reusing the finished run");
+                    } else {
+                        grid::run_cell(&runs, i)?;
+                    }
+                }
+                grid::merge(&runs)
+            })
             .map_err(anyhow::Error::from)
             .and_then(|merged| {
                 let failed: Vec<String> = merged

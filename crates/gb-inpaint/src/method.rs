@@ -280,8 +280,12 @@ pub struct MethodConfig {
     #[serde(default)]
     pub visibility: VisibilityConfig,
     /// Per-scene personalisation of the prior before guidance (off by default; see
-    /// [`crate::personalize`]).
-    #[serde(default)]
+    /// [`crate::personalize`]). Left out of the written config while it is the default, so
+    /// that configs and checkpoints of methods without it read as before.
+    #[serde(
+        default,
+        skip_serializing_if = "crate::personalize::PersonalizeSettings::is_default"
+    )]
     pub personalize: crate::personalize::PersonalizeSettings,
 }
 
@@ -564,6 +568,21 @@ mod tests {
             let text = toml::to_string(&m).unwrap();
             let back = MethodConfig::from_toml(&text, Path::new("rt.toml")).unwrap();
             assert_eq!(back, m, "{text}");
+            // without personalisation the written method is what it was before the setting
+            // existed, so older configs and checkpoints still match
+            assert!(!text.contains("personalize"), "{text}");
         }
+        let mut m = MethodConfig::builtin("gb-nerf-unseen").unwrap();
+        m.personalize.steps = 50;
+        let text = toml::to_string(&m).unwrap();
+        assert!(
+            text.contains("[personalize]") && text.contains("steps = 50"),
+            "{text}"
+        );
+        let back = MethodConfig::from_toml(&text, Path::new("rt.toml")).unwrap();
+        assert_eq!(back, m);
+        let typo = text.replace("steps = 50", "stpes = 50");
+        let e = MethodConfig::from_toml(&typo, Path::new("rt.toml")).unwrap_err();
+        assert!(e.to_string().contains("stpes"), "{e}");
     }
 }

@@ -23,8 +23,8 @@ use gb_nerf::render::rays::{all_pixels, camera_rays};
 use gb_nerf::scene::procedural::render;
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
 use gb_nerf::scene::{LoadOptions, Mask, Scene, Split};
-use gb_nerf::train::data::TrainView;
-use gb_nerf::train::NerfConfig;
+use gb_nerf::train::data::{TrainData, TrainView};
+use gb_nerf::train::{DepthSupervision, NerfConfig};
 
 /// Field initialisation seeds a process-global device RNG: one test at a time.
 static LOCK: Mutex<()> = Mutex::new(());
@@ -178,12 +178,21 @@ fn ground_truth_map(
 
 #[test]
 fn observed_maps_agree_with_ground_truth_visibility() {
-    let (_guard, _dir, mut t) = setup(300);
+    let (_guard, dir, mut t) = setup(300);
     let views: Vec<usize> = (0..t.data.views.len())
         .filter(|&v| t.data.views[v].mask.is_some())
         .collect();
     assert!(views.len() >= 4);
     let free = object_free_depths(&t.data.views);
+    // the training views with their ground-truth depth (the trainer's keep only what
+    // supervises them: sparse points by default)
+    let scene = gb_nerf::scene::load(dir.path(), &LoadOptions::default())
+        .unwrap()
+        .1;
+    let downscale = t.nerf.config.train.image_downscale;
+    let truth_views = TrainData::from_scene(&scene, downscale, DepthSupervision::Dense)
+        .unwrap()
+        .views;
     let (mut agree, mut total, mut obs_ours, mut obs_gt) = (0usize, 0usize, 0usize, 0usize);
     for &v in &views {
         let map = t
@@ -191,7 +200,7 @@ fn observed_maps_agree_with_ground_truth_visibility() {
             .unwrap()
             .expect("visibility is on")
             .clone();
-        let gt = ground_truth_map(&t.data.views, &free, v, 32, 0.05);
+        let gt = ground_truth_map(&truth_views, &free, v, 32, 0.05);
         let g = CropGeometry::new(&t.data.views[v], 0.25, 32).unwrap();
         for &i in &g.masked {
             total += 1;

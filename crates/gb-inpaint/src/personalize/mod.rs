@@ -91,6 +91,11 @@ impl PersonalizeSettings {
         self.steps > 0
     }
 
+    /// Whether these are the default settings (off).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
     /// The fine-tuning recipe at the prior's `resolution`.
     fn recipe(&self, resolution: usize) -> FinetuneConfig {
         FinetuneConfig {
