@@ -382,7 +382,8 @@ fn pre_inpainted_without_inpainted_images_is_an_error_naming_the_scene() {
 
 #[test]
 fn without_method_and_prior_the_default_runs() {
-    // gb-nerf with the built-in tiny prior (assets/tiny-prior) and its LoRA
+    // gb-nerf-unseen (the recommended method) with the built-in tiny prior
+    // (assets/tiny-prior) and its LoRA
     let dir = tempfile::tempdir().unwrap();
     let (scene, preset) = setup(dir.path());
     let out = dir.path().join("out");
@@ -391,7 +392,7 @@ fn without_method_and_prior_the_default_runs() {
         "default",
     );
     let m = metrics(&out);
-    assert_eq!(m["method"], "gb-nerf");
+    assert_eq!(m["method"], "gb-nerf-unseen");
     let cfg = std::fs::read_to_string(out.join("config.toml")).unwrap();
     assert!(cfg.contains("tiny-prior"), "{cfg}");
 }

@@ -60,7 +60,7 @@ fn the_installed_command_runs_the_default_job_without_the_source_tree() {
     let run = work.join("run");
     let metrics: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap()).unwrap();
-    assert_eq!(metrics["method"], "gb-nerf");
+    assert_eq!(metrics["method"], "gb-nerf-unseen");
     let prior = metrics["prior"].as_str().unwrap();
     let cache = home.join(".cache/gb-nerf");
     assert!(

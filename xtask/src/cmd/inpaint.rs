@@ -10,8 +10,8 @@
 //!
 //! - `--method`: a built-in method (`configs/methods/`: gb-nerf, gb-nerf-unseen, bsd,
 //!   mvip-nerf, spin-nerf-sds, csd, none, pre-inpainted) or a `.toml` file (a method file, or
-//!   a run's `config.toml`, whose `[method]` table is used). Default `gb-nerf`; `none` is the no-prior
-//!   baseline.
+//!   a run's `config.toml`, whose `[method]` table is used). Default `gb-nerf-unseen`, the
+//!   method the README recommends; `none` is the no-prior baseline.
 //! - `--preset`: fast, balanced, paper, or a `.toml` file (a preset, or a run's
 //!   `config.toml`, whose `[preset]` table is used).
 //! - `--prior`: `tiny` (the built-in prior, `assets/tiny-prior`, the default), a
@@ -66,8 +66,8 @@ pub struct Args {
     /// `stairs` scene into OUT/scene.
     #[arg(long)]
     pub scene: Option<PathBuf>,
-    /// Method: gb-nerf (default), gb-nerf-unseen, bsd, mvip-nerf, spin-nerf-sds, csd, none,
-    /// pre-inpainted, or a .toml file.
+    /// Method: gb-nerf-unseen (default, the recommended one), gb-nerf (the paper), bsd,
+    /// mvip-nerf, spin-nerf-sds, csd, none, pre-inpainted, or a .toml file.
     #[arg(long)]
     pub method: Option<String>,
     /// Preset name (fast, balanced, paper) or a path to a TOML config.

@@ -23,7 +23,7 @@ use gb_eval::suite::{evaluate, PairSet, SuiteOptions};
 use gb_nerf::train::DepthSupervision;
 
 pub use config_file::shell_quote;
-pub use setup::{load_method, load_preset, method_and_prior};
+pub use setup::{load_method, load_preset, method_and_prior, DEFAULT_METHOD};
 pub use summary::{GuidanceSummary, MeanMetrics, OrbitSummary, RunSummary, ViewMetrics, NOTES};
 pub use test_views::disparity_map;
 
@@ -42,7 +42,7 @@ pub struct RunSpec {
     /// scene, generated into `OUT/scene`.
     pub scene: Option<PathBuf>,
     /// A built-in method name or a `.toml` file (a method, or a run's `config.toml`);
-    /// `None`: `gb-nerf` (or `none` when `prior` is `none`).
+    /// `None`: [`DEFAULT_METHOD`] (or `none` when `prior` is `none`).
     pub method: Option<String>,
     /// A preset name (fast, balanced, paper) or a `.toml` file.
     pub preset: String,
