@@ -211,10 +211,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .and_then(|g| {
                 for (i, cell) in g.cells.iter().enumerate() {
                     let dir = runs.join(&cell.dir);
-                    let finished = dir.join("metrics.json").is_file()
-                        && dir.join(grid::CELL_TIME_FILE).is_file()
-                        && !dir.join(grid::CELL_ERROR_FILE).is_file();
-                    if args.reuse_finished && finished {
+                    if args.reuse_finished && grid::cell_finished(&dir) {
                         tracing::info!(cell = %dir.display(), "reusing the finished run");
                     } else {
                         grid::run_cell(&runs, i)?;

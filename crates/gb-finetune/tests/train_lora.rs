@@ -53,7 +53,12 @@ fn device() -> (Device, Device) {
     (k.autodiff_device(), k.device())
 }
 
-use gb_finetune::train::models::parameter_values as params;
+use gb_finetune::train::models::parameter_values;
+
+/// Every float parameter of `m` by path.
+fn params<M: burn::module::Module>(m: &M) -> std::collections::BTreeMap<String, Vec<f32>> {
+    parameter_values(m).unwrap()
+}
 
 fn is_factor(path: &str) -> bool {
     path.contains(".lora.") || path.contains(".conv_lora.")

@@ -72,7 +72,7 @@ pub fn lora_for(
 }
 
 /// Reads a LoRA file; the error names it once.
-fn read_lora(path: &Path) -> Result<LoraFile, InpaintError> {
+pub(crate) fn read_lora(path: &Path) -> Result<LoraFile, InpaintError> {
     LoraFile::read(path).map_err(|e| {
         // gb-diffusion's message already starts with "LoRA file PATH: "
         let text = e.to_string();

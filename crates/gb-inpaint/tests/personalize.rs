@@ -61,7 +61,12 @@ fn inputs<'a>(
     }
 }
 
-use gb_finetune::train::models::parameter_values as params;
+use gb_finetune::train::models::parameter_values;
+
+/// Every float parameter of `m` by path.
+fn params<M: burn::module::Module>(m: &M) -> std::collections::BTreeMap<String, Vec<f32>> {
+    parameter_values(m).unwrap()
+}
 
 #[test]
 fn patches_avoid_the_masks_and_training_moves_only_the_adapters_and_lowers_the_loss() {

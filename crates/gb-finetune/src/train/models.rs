@@ -20,15 +20,26 @@ use gb_diffusion::tokenizer::ClipTokenizer;
 use crate::FinetuneError;
 
 /// Every float parameter of `m` by its path (LoRA factors included: their paths contain
-/// `.lora.`), as `f32` values: what a run compares to show which weights moved.
-pub fn parameter_values<M: Module>(m: &M) -> std::collections::BTreeMap<String, Vec<f32>> {
+/// `.lora.`), as `f32` values: what a run compares to show which weights moved. A parameter
+/// that cannot be read is an error naming it, never a missing entry.
+pub fn parameter_values<M: Module>(
+    m: &M,
+) -> Result<std::collections::BTreeMap<String, Vec<f32>>, FinetuneError> {
     use burn::store::{bridge, ModuleSnapshot};
     m.collect(None, None, false)
         .into_iter()
-        .filter_map(|t| {
+        .map(|t| {
             let name = t.name.clone();
-            let data = bridge::into_data(t).ok()?.convert::<f32>();
-            Some((name, data.try_to_vec::<f32>().ok()?))
+            let unreadable = |e: String| FinetuneError::Diffusion {
+                context: format!("reading parameter {name}"),
+                message: e,
+            };
+            let data = bridge::into_data(t).map_err(|e| unreadable(format!("{e:?}")))?;
+            let values = data
+                .convert::<f32>()
+                .try_to_vec::<f32>()
+                .map_err(|e| unreadable(format!("{e:?}")))?;
+            Ok((name, values))
         })
         .collect()
 }

@@ -209,6 +209,14 @@ pub fn run_all(grid_dir: &Path) -> Result<MergeReport, InpaintError> {
     merge(grid_dir)
 }
 
+/// Whether the run in the cell folder `dir` finished: its summary and wall time are written
+/// and no error is recorded.
+pub fn cell_finished(dir: &Path) -> bool {
+    !dir.join(CELL_ERROR_FILE).is_file()
+        && dir.join("metrics.json").is_file()
+        && dir.join(CELL_TIME_FILE).is_file()
+}
+
 /// Reads a cell's outcome from its folder: the summary, the recorded error, or missing.
 pub(crate) fn read_outcome(grid_dir: &Path, index: usize, cell: &GridCell) -> (RunOutcome, bool) {
     let dir = grid_dir.join(&cell.dir);
@@ -220,7 +228,7 @@ pub(crate) fn read_outcome(grid_dir: &Path, index: usize, cell: &GridCell) -> (R
     let metrics = dir.join("metrics.json");
     let (result, missing) = if let Ok(err) = std::fs::read_to_string(dir.join(CELL_ERROR_FILE)) {
         (Err(err), false)
-    } else if metrics.is_file() && dir.join(CELL_TIME_FILE).is_file() {
+    } else if cell_finished(&dir) {
         (RunSummary::read(&metrics).map_err(|e| e.to_string()), false)
     } else {
         (Err(format!("cell {index} has not finished")), true)

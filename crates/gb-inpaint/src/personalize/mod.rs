@@ -25,7 +25,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use gb_core::BackendKind;
-use gb_diffusion::lora::LoraFile;
 use gb_finetune::captions::CaptionMode;
 use gb_finetune::train::batch::make_batch;
 use gb_finetune::train::loss::inpainting_loss;
@@ -125,9 +124,9 @@ pub struct PersonalizeReport {
     pub lora: PathBuf,
     /// AdamW steps.
     pub steps: usize,
-    /// Patches it trained on, and their side in training pixels.
+    /// Patches it trained on.
     pub patches: usize,
-    /// The patch side.
+    /// Their side, training-resolution pixels.
     pub patch_side: usize,
     /// Mean inpainting loss on the held-out batches before training.
     pub loss_before: f64,
@@ -240,15 +239,7 @@ pub fn scene_patches(i: &PersonalizeInputs) -> Result<ScenePatches, InpaintError
 /// adapters attached, on the autodiff device of the run's backend.
 pub fn new_trainer(i: &PersonalizeInputs) -> Result<FinetuneTrainer, InpaintError> {
     let device = i.backend.autodiff_device();
-    let base = i
-        .lora
-        .map(|p| {
-            LoraFile::read(p).map_err(|e| InpaintError::Lora {
-                path: p.to_path_buf(),
-                reason: e.to_string(),
-            })
-        })
-        .transpose()?;
+    let base = i.lora.map(crate::prior::read_lora).transpose()?;
     let models = PriorModels::load_merged(i.prior, base.as_ref(), &device)
         .map_err(finetune_err("loading the prior"))?;
     FinetuneTrainer::new(models, i.settings.recipe(i.resolution), &device)

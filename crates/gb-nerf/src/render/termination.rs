@@ -26,9 +26,6 @@ use super::FIELD_CHUNK_SAMPLES;
 use crate::field::NerfField;
 use crate::sampler::SampleSet;
 
-/// nerfacc's default: a ray stops once less than 1e-4 of its light remains.
-pub const DEFAULT_EARLY_STOP_EPS: f32 = 1e-4;
-
 /// The field's densities at `points`, in chunks, without a graph.
 fn densities(field: &NerfField, points: &[[f32; 3]]) -> Option<Vec<f32>> {
     let mut out = Vec::with_capacity(points.len());

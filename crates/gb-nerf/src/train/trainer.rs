@@ -1,6 +1,6 @@
 //! The reconstruction trainer: RGB loss on unmasked pixels, disparity loss on sparse points
-//! or dense depth ([`DepthSupervision`]), Adam with an exponentially decaying learning rate, occupancy-grid updates,
-//! progress bar, atomic checkpoints and resume.
+//! or dense depth ([`DepthSupervision`]), Adam with an exponentially decaying learning rate,
+//! occupancy-grid updates, progress bar, atomic checkpoints and resume.
 
 use std::path::Path;
 use std::time::Instant;
@@ -191,35 +191,30 @@ impl Trainer {
         } else {
             ((n as f32 * SPARSE_RAY_SHARE).round() as usize).clamp(1, n)
         };
-        for _ in 0..n_sparse {
-            let p = self.data.sparse[self.rng.random_range(0..self.data.sparse.len())];
-            let v = &self.data.views[p.view as usize];
-            let r = camera_rays(&v.camera, &[[p.x, p.y]], &self.space, self.near, self.far);
-            rays.origins.extend(r.origins);
-            rays.dirs.extend(r.dirs);
-            rays.near.extend(r.near);
-            rays.far.extend(r.far);
-            rgb.extend_from_slice(&v.image.get(p.x as usize, p.y as usize));
-            disp.push(self.near / p.depth);
-            valid.push(1.0);
-        }
-        for _ in n_sparse..n {
-            let p = self.data.pixels[self.rng.random_range(0..self.data.pixels.len())];
-            let v = &self.data.views[p.view as usize];
-            let px = [p.x as f32 + 0.5, p.y as f32 + 0.5];
+        for k in 0..n {
+            // the ray's view, continuous pixel position and ground-truth z-depth, if any
+            let (view, px, depth) = if k < n_sparse {
+                let p = self.data.sparse[self.rng.random_range(0..self.data.sparse.len())];
+                (p.view, [p.x, p.y], Some(p.depth))
+            } else {
+                let p = self.data.pixels[self.rng.random_range(0..self.data.pixels.len())];
+                let v = &self.data.views[p.view as usize];
+                let d = v
+                    .depth
+                    .as_ref()
+                    .map(|d| d[p.y as usize * v.image.width + p.x as usize])
+                    .filter(|d| d.is_finite() && *d > 0.0);
+                (p.view, [p.x as f32 + 0.5, p.y as f32 + 0.5], d)
+            };
+            let v = &self.data.views[view as usize];
             let r = camera_rays(&v.camera, &[px], &self.space, self.near, self.far);
             rays.origins.extend(r.origins);
             rays.dirs.extend(r.dirs);
             rays.near.extend(r.near);
             rays.far.extend(r.far);
-            rgb.extend_from_slice(&v.image.get(p.x as usize, p.y as usize));
-            let d = v
-                .depth
-                .as_ref()
-                .map(|d| d[p.y as usize * v.image.width + p.x as usize])
-                .filter(|d| d.is_finite() && *d > 0.0);
-            disp.push(d.map_or(0.0, |d| self.near / d));
-            valid.push(if d.is_some() { 1.0 } else { 0.0 });
+            rgb.extend_from_slice(&v.image.get(px[0] as usize, px[1] as usize));
+            disp.push(depth.map_or(0.0, |d| self.near / d));
+            valid.push(if depth.is_some() { 1.0 } else { 0.0 });
         }
         (rays, rgb, disp, valid)
     }

@@ -190,18 +190,12 @@ impl Model {
         stems: impl IntoIterator<Item = &'a str>,
     ) -> Result<Vec<&Image>, SceneError> {
         let images = images_file(dir);
-        let stem_of = |name: &str| {
-            Path::new(name)
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default()
-        };
         stems
             .into_iter()
             .map(|n| {
                 self.images
                     .values()
-                    .find(|im| stem_of(&im.name) == n)
+                    .find(|im| Path::new(&im.name).file_stem() == Some(n.as_ref()))
                     .ok_or_else(|| {
                         bad(
                             &images,
