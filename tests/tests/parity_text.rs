@@ -97,6 +97,10 @@ fn parity_tokenizer_writes_transformers_ids() {
 }
 
 fn text_encoder(lora: Option<&str>) -> Vec<f32> {
+    text_encoder_with(lora, &["--device", "flex"])
+}
+
+fn text_encoder_with(lora: Option<&str>, extra: &[&str]) -> Vec<f32> {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out.safetensors");
     let model = fixtures().join("clip_quick");
@@ -112,9 +116,8 @@ fn text_encoder(lora: Option<&str>) -> Vec<f32> {
         inputs.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
-        "--device",
-        "flex",
     ];
+    args.extend(extra);
     if let Some(l) = &lora_path {
         args.extend(["--lora", l.to_str().unwrap()]);
     }
@@ -158,4 +161,44 @@ fn parity_with_a_missing_model_exits_2_with_one_line() {
     assert_eq!(run.status.code(), Some(2));
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(err.contains("/nonexistent/model/dir"), "{err}");
+}
+
+/// `--precision f16`: the text encoder in half precision against transformers in fp16
+/// (crates/gb-diffusion/tests/fixtures/fp16, tools/parity/make_fp16_fixtures.py), within
+/// 1e-2 of the output's largest magnitude; ndarray, which has no f16 tensors, is refused with
+/// a line naming the flag.
+#[test]
+fn parity_text_encoder_in_f16_matches_transformers_fp16() {
+    let fp16 = workspace_root().join("crates/gb-diffusion/tests/fixtures/fp16/fp16_io.safetensors");
+    let want = f32s(&read_safetensors(&fp16)["clip_last_hidden_state"].2);
+    let got = text_encoder_with(None, &["--device", "flex", "--precision", "f16"]);
+    let scale = want.iter().fold(0f32, |m, v| m.max(v.abs()));
+    let err = max_abs(&got, &want) / scale;
+    assert!(err < 1e-2, "f16 text encoder: {err} of the largest value");
+    let f32_out = text_encoder(None);
+    assert!(
+        max_abs(&got, &f32_out) > 1e-5,
+        "--precision f16 computed in f32"
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    let run = xtask(&[
+        "parity",
+        "--component",
+        "text-encoder",
+        "--model",
+        fixtures().join("clip_quick").to_str().unwrap(),
+        "--inputs",
+        fixtures().join("text_io.safetensors").to_str().unwrap(),
+        "--out",
+        dir.path().join("o.safetensors").to_str().unwrap(),
+        "--device",
+        "ndarray",
+        "--precision",
+        "f16",
+    ]);
+    assert!(!run.status.success());
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(stderr.contains("--precision"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
 }

@@ -20,8 +20,9 @@
 //! prior in the pipeline step, a few NeRF steps, no Python reference, no setup), on any
 //! device, lavapipe included, so that GPU time is never spent finding a bug.
 //!
-//! The U-Net runs in f32 only: the frozen prior has no f16 path yet, so the f16 entries name
-//! that instead of a time.
+//! The U-Net and the VAE encoder are timed in f32 and, where the device has f16 tensors, in
+//! f16 (`--precision f16`: f16 weights and activations, norms and softmax in f32). The
+//! pipeline step runs in the device's default precision: f16 on a GPU card.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -30,9 +31,10 @@ use std::time::Instant;
 use anyhow::{bail, Context};
 use burn::module::Module;
 use burn::tensor::{Distribution, Tensor};
-use gb_core::BackendKind;
+use gb_core::{BackendKind, Precision};
 use gb_diffusion::config::{AutoencoderKLConfig, UNet2DConditionConfig};
 use gb_diffusion::models::{AutoencoderKL, UNet2DConditionModel};
+use gb_diffusion::precision::cast_frozen;
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
 use gb_nerf::scene::LoadOptions;
 use gb_nerf::train::{NerfConfig, Trainer};
@@ -127,8 +129,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
 
     tracing::info!(device = %kind, smoke = args.smoke, "U-Net and VAE encoder");
-    let unet = unet_forward(&sizes, kind)?;
-    let vae = vae_encoder_fwd_bwd(&sizes, kind)?;
+    let f16 = kind.device().supports_dtype(burn::tensor::DType::F16);
+    let unet = unet_forward(&sizes, kind, Precision::F32)?;
+    let unet_f16 = f16
+        .then(|| unet_forward(&sizes, kind, Precision::F16))
+        .transpose()?;
+    let vae = vae_encoder_fwd_bwd(&sizes, kind, Precision::F32)?;
+    let vae_f16 = f16
+        .then(|| vae_encoder_fwd_bwd(&sizes, kind, Precision::F16))
+        .transpose()?;
     let python = match reference.as_deref() {
         Some(py) => diffusers_reference(py, &sizes),
         None => json!({ "skipped": if args.smoke { "--smoke" } else { "--python none" } }),
@@ -165,16 +174,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "shape": if args.smoke { "the tiny prior's U-Net" } else { "SD-1.5-inpainting (859.5M parameters, random weights)" },
             "batch": 2, "latent": sizes.latent,
             "unet_forward_f32_s": unet,
-            "unet_forward_f16_s": Value::Null,
-            "unet_f16_status": "no f16 path yet: the frozen prior loads and runs in f32",
+            "unet_forward_f16_s": unet_f16,
+            "unet_f16_status": if f16 { "measured (--precision f16: f16 weights and activations, f32 norms and softmax)" } else { "the device has no f16 tensors" },
             "diffusers_unet_forward_fp32_s": python.get("unet_forward_s"),
             "diffusers_unet_forward_fp16_s": python.get("unet_forward_fp16_s"),
             "unet_f32_ratio_vs_diffusers_fp32": ratio(unet, "unet_forward_s"),
-            "unet_f16_ratio_vs_diffusers_fp16": Value::Null,
+            "unet_f16_ratio_vs_diffusers_fp16": unet_f16.map_or(Value::Null, |s| ratio(s, "unet_forward_fp16_s")),
         },
         "vae_encoder": {
             "side": sizes.vae_side,
             "vae_encoder_fwd_bwd_s": vae,
+            "vae_encoder_fwd_bwd_f16_s": vae_f16,
             "diffusers_vae_encoder_fwd_bwd_s": vae_ref,
             "vae_ratio_vs_diffusers": vae_ref.filter(|p| *p > 0.0).map(|p| vae / p),
         },
@@ -255,10 +265,10 @@ fn sync<const D: usize>(t: Tensor<D>) -> f32 {
     t.sum().into_scalar::<f32>()
 }
 
-/// U-Net forward seconds, batch 2, random weights.
-fn unet_forward(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<f64> {
+/// U-Net forward seconds, batch 2, random weights, in `precision`.
+fn unet_forward(sizes: &Sizes, kind: BackendKind, precision: Precision) -> anyhow::Result<f64> {
     let device = kind.device();
-    let unet = UNet2DConditionModel::new(&sizes.unet, &device);
+    let unet = cast_frozen(UNet2DConditionModel::new(&sizes.unet, &device), precision);
     let ctx = sizes.unet.cross_attention_dim;
     let x = Tensor::<4>::random(
         [2, sizes.unet.in_channels, sizes.latent, sizes.latent],
@@ -273,10 +283,15 @@ fn unet_forward(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<f64> {
     })
 }
 
-/// VAE encoder forward and backward seconds (frozen weights, gradient to the image).
-fn vae_encoder_fwd_bwd(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<f64> {
+/// VAE encoder forward and backward seconds (frozen weights in `precision`, gradient to the
+/// image).
+fn vae_encoder_fwd_bwd(
+    sizes: &Sizes,
+    kind: BackendKind,
+    precision: Precision,
+) -> anyhow::Result<f64> {
     let ad = kind.autodiff_device();
-    let vae = AutoencoderKL::new(&sizes.vae, &ad).no_grad();
+    let vae = cast_frozen(AutoencoderKL::new(&sizes.vae, &ad), precision).no_grad();
     let side = sizes.vae_side;
     time_best(sizes.repeats, || {
         let img = Tensor::<4>::random([1, 3, side, side], Distribution::Uniform(-1.0, 1.0), &ad)
@@ -298,6 +313,7 @@ fn pipeline_step(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<Value> {
         steps: sizes.repeats,
         warmup: 1,
         device: Some(kind),
+        precision: None,
         floor_tflop: 4.0,
         peak_tflops: Vec::new(),
         out: tmp.path().to_path_buf(),

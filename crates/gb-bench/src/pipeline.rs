@@ -26,7 +26,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context};
 use burn::tensor::{Distribution, Tensor};
-use gb_core::BackendKind;
+use gb_core::{BackendKind, Precision};
 use gb_diffusion::config::ClipTextConfig;
 use gb_diffusion::distill::EpsBatch;
 use gb_inpaint::{GuidancePrior, GuidedTrainer, MethodConfig, Modality, SceneCaptions};
@@ -56,6 +56,9 @@ pub struct Args {
     /// Backend.
     #[arg(long, value_enum)]
     pub device: Option<BackendKind>,
+    /// The prior's precision (default: f16 on a GPU card, f32 elsewhere).
+    #[arg(long, value_enum)]
+    pub precision: Option<Precision>,
     /// Arithmetic of one guidance step at the prior's resolution, TFLOP.
     #[arg(long, default_value_t = 4.0)]
     pub floor_tflop: f64,
@@ -212,6 +215,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let kind = args.device.unwrap_or_default();
     let device = kind.device();
+    let precision = Precision::resolve(args.precision, &device).context("--precision")?;
     let gpu = GpuMemoryPoll::start();
     let tmp = tempfile::tempdir()?;
     let scene_dir = tmp.path().join("stairs");
@@ -233,11 +237,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &super::unet::sd15_vae()?,
             &sd15_text_encoder(),
             &gb_core::assets_dir().join("clip-tokenizer"),
+            precision,
             &device,
         )?,
         spec => {
             let dir = gb_diffusion::checkpoint::resolve_prior(spec)?;
-            GuidancePrior::load(&dir, None, &device)?
+            GuidancePrior::load_personalized(&dir, None, None, precision, &device)?
         }
     };
     let build_s = build.elapsed().as_secs_f64();
@@ -352,6 +357,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "machine": super::machine_description(),
         "gpu": gpu_name(),
         "device": kind.name(),
+        "precision": precision.name(),
         "profile": if cfg!(debug_assertions) { "dev (deps at opt-level 3)" } else { "release" },
         "prior": args.prior, "prior_resolution": res, "prior_build_s": build_s,
         "preset": args.preset, "method": args.method, "scene": "stairs (procedural)",

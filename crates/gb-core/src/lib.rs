@@ -1,7 +1,7 @@
 //! Shared plumbing used by every gb-nerf-rs crate: run-time backend selection
 //! ([`backend`]), crash-safe file writes ([`atomic`]), PNG/JPEG image IO ([`image_io`]),
 //! progress bars that do not fight the log ([`progress`]), one-line error messages
-//! ([`messages`]), row lookups with a parallel backward ([`indexing`]) and, with the
+//! ([`messages`]), the prior's float precision ([`precision`]), row lookups with a parallel backward ([`indexing`]) and, with the
 //! `clap` feature, the command lines' value parsers (`cli`).
 
 pub mod assets;
@@ -13,6 +13,7 @@ pub mod image_io;
 pub mod indexing;
 pub mod messages;
 pub mod npy_guard;
+pub mod precision;
 pub mod progress;
 pub mod resample;
 pub mod tensor_values;
@@ -24,5 +25,6 @@ pub use backend::{heavy_test_backends, test_backends, BackendKind};
 pub use image_io::{read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage};
 pub use indexing::gather_rows;
 pub use npy_guard::check_npy_header;
+pub use precision::{Precision, PrecisionError};
 pub use tensor_values::{device_reads, f32_values, read_f32, TensorValuesError};
 pub use testdata::test_data_dir;

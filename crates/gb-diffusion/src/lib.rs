@@ -8,6 +8,7 @@ pub mod inpaint;
 pub mod lora;
 pub mod models;
 pub mod pipeline;
+pub mod precision;
 pub mod scheduler;
 pub mod tensor_file;
 pub mod tokenizer;

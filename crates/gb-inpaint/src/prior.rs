@@ -6,6 +6,11 @@
 //! VAE lives on its autodiff version with frozen parameters, so that the guidance gradient
 //! reaches the rendered image through the encoder only.
 //!
+//! All three compute in the run's [`Precision`] (`--precision`; f16 by default on a GPU card,
+//! f32 elsewhere; see [`gb_diffusion::precision`]): the weights are cast once, after any LoRA
+//! is merged in f32. What enters and leaves the networks, the score combination and the
+//! gradient handed to the NeRF stay f32.
+//!
 //! Which LoRA: `--lora FILE` when given (whatever the method says, with a note in the log),
 //! else `PRIOR/pytorch_lora_weights.safetensors` when the method has `use_lora = true` (an
 //! error naming that path when it does not exist), else none. A LoRA file that cannot be
@@ -25,6 +30,7 @@ use gb_diffusion::distill::{AlphasCumprod, InpaintEpsPredictor, LatentEncoder, P
 use gb_diffusion::lora::LoraFile;
 use gb_diffusion::models::{AutoencoderKL, UNet2DConditionModel};
 use gb_diffusion::pipeline::{LoraCounts, SdComponents};
+use gb_diffusion::precision::{cast_frozen, Precision};
 use gb_diffusion::tokenizer::ClipTokenizer;
 use serde::Serialize;
 
@@ -94,6 +100,8 @@ pub struct PriorInfo {
     /// The per-scene LoRA merged on top, if any ([`crate::personalize`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub personal_lora: Option<PathBuf>,
+    /// The precision the networks compute in.
+    pub precision: Precision,
     /// Weights adapted by the LoRA in the U-Net.
     pub lora_unet_weights: usize,
     /// Weights adapted by the LoRA in the text encoder.
@@ -123,18 +131,20 @@ pub struct GuidancePrior {
 }
 
 impl GuidancePrior {
-    /// Loads the prior folder `root` on `device` (the plain device of the run's backend) and
-    /// attaches `lora` (see the module docs).
+    /// Loads the prior folder `root` on `device` (the plain device of the run's backend) in
+    /// the device's default precision and attaches `lora` (see the module docs).
     pub fn load(root: &Path, lora: Option<&Path>, device: &Device) -> Result<Self, InpaintError> {
-        Self::load_personalized(root, lora, None, device)
+        Self::load_personalized(root, lora, None, Precision::default_for(device), device)
     }
 
-    /// [`Self::load`], then the per-scene LoRA `personal` ([`crate::personalize`], trained on
-    /// top of the prior with `lora` merged) merged as well.
+    /// [`Self::load`] in `precision`, then the per-scene LoRA `personal`
+    /// ([`crate::personalize`], trained on top of the prior with `lora` merged) merged as
+    /// well.
     pub fn load_personalized(
         root: &Path,
         lora: Option<&Path>,
         personal: Option<&Path>,
+        precision: Precision,
         device: &Device,
     ) -> Result<Self, InpaintError> {
         let prior_err = |component: &str, e: &dyn std::fmt::Display| InpaintError::Prior {
@@ -191,6 +201,7 @@ impl GuidancePrior {
             root.to_path_buf(),
             lora.map(Path::to_path_buf),
             (counts.unet, counts.text_encoder),
+            precision,
             device,
         );
         prior.info.personal_lora = personal.map(Path::to_path_buf);
@@ -205,6 +216,7 @@ impl GuidancePrior {
         vae: &AutoencoderKLConfig,
         text: &ClipTextConfig,
         tokenizer_dir: &Path,
+        precision: Precision,
         device: &Device,
     ) -> Result<Self, InpaintError> {
         let prior_err = |component: &str, e: &dyn std::fmt::Display| InpaintError::Prior {
@@ -226,7 +238,13 @@ impl GuidancePrior {
             prediction: sched.prediction_type,
             alphas,
         };
-        Ok(parts.into_prior(PathBuf::from("random-weights"), None, (0, 0), device))
+        Ok(parts.into_prior(
+            PathBuf::from("random-weights"),
+            None,
+            (0, 0),
+            precision,
+            device,
+        ))
     }
 }
 
@@ -245,13 +263,14 @@ struct Parts {
 }
 
 impl Parts {
-    /// Wraps the networks behind the distillation interfaces; `lora_weights` are the U-Net
-    /// and text-encoder weights a LoRA adapted.
+    /// Casts the networks to `precision` and wraps them behind the distillation interfaces;
+    /// `lora_weights` are the U-Net and text-encoder weights a LoRA adapted.
     fn into_prior(
         self,
         folder: PathBuf,
         lora: Option<PathBuf>,
         lora_weights: (usize, usize),
+        precision: Precision,
         device: &Device,
     ) -> GuidancePrior {
         let resolution = self.sample_size.unwrap_or(64) * self.factor;
@@ -260,6 +279,7 @@ impl Parts {
                 folder,
                 lora,
                 personal_lora: None,
+                precision,
                 lora_unet_weights: lora_weights.0,
                 lora_text_encoder_weights: lora_weights.1,
                 resolution,
@@ -267,15 +287,18 @@ impl Parts {
                 num_train_timesteps: self.alphas.len(),
             },
             unet: Box::new(SdUnetEps::new(
-                self.unet,
+                cast_frozen(self.unet, precision),
                 self.in_channels,
                 self.prediction,
                 self.alphas.clone(),
             )),
-            encoder: Box::new(SdVaeEncoder::new(self.vae.no_grad(), self.factor)),
+            encoder: Box::new(SdVaeEncoder::new(
+                cast_frozen(self.vae, precision).no_grad(),
+                self.factor,
+            )),
             text: Box::new(ClipPromptEncoder::new(
                 self.tokenizer,
-                self.text,
+                cast_frozen(self.text, precision),
                 device.clone(),
             )),
             alphas: self.alphas,

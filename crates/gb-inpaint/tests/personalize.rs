@@ -165,6 +165,7 @@ fn a_run_reuses_its_lora_until_what_it_was_trained_from_changes() {
         &prior,
         Some(&lora),
         Some(&file),
+        gb_core::Precision::F32,
         &BackendKind::Flex.device(),
     )
     .unwrap();

@@ -4,7 +4,7 @@
 //! ```text
 //! cargo xtask inpaint [--scene DIR] [--method M] [--preset P] [--prior none|tiny|DIR|HUB_ID]
 //!     [--lora FILE] [--prompt P] [--negative-prompt N] [--normal-prompt G] [--device D]
-//!     [--out DIR] [--resume] [--steps N] [--seed N] [--depth sparse|dense|none]
+//!     [--precision f32|f16] [--out DIR] [--resume] [--steps N] [--seed N] [--depth sparse|dense|none]
 //!     [--personalize STEPS] [--baseline DIR] [--weights DIR] [--orbit-frames N]
 //! ```
 //!
@@ -54,7 +54,7 @@
 
 use std::path::PathBuf;
 
-use gb_core::BackendKind;
+use gb_core::{BackendKind, Precision};
 use gb_inpaint::run::{run as run_spec, RunSpec, RunSummary};
 use gb_inpaint::PromptOverrides;
 use gb_nerf::train::DepthSupervision;
@@ -94,6 +94,11 @@ pub struct Args {
     /// Compute backend: ndarray, flex or wgpu.
     #[arg(long, value_enum)]
     pub device: Option<BackendKind>,
+    /// The prior's precision: f16 (half-precision weights and activations; norms, softmax
+    /// and the gradient to the NeRF in f32) or f32. Default: f16 on a GPU card, f32 on the
+    /// CPU backends and on lavapipe. ndarray has f32 only.
+    #[arg(long, value_enum)]
+    pub precision: Option<Precision>,
     /// Continue from OUT/checkpoint.bin when it exists.
     #[arg(long)]
     pub resume: bool,
@@ -142,6 +147,7 @@ impl Args {
                 geometry: self.normal_prompt.clone(),
             },
             device: self.device.unwrap_or_default(),
+            precision: self.precision,
             seed: self.seed,
             steps: self.steps,
             depth: self.depth,

@@ -9,6 +9,10 @@
 //! - `unet`: IN holds `sample`, `timestep`, `encoder_hidden_states`; writes `out`
 //!   (`--lora` applies a U-Net LoRA first).
 //!
+//! `--precision f16` runs the networks as a run's prior does in f16 (half-precision weights
+//! and activations, norms and softmax in f32), for comparison with diffusers in fp16; the
+//! default is f32, whatever the device. `--device` picks the backend.
+//!
 //! Extension point (sd-image): add `VaeEncode`, `VaeDecode`, `Unet` variants to
 //! [`Component`] and one match arm each in [`run`], in a function of their own below.
 
@@ -17,13 +21,14 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use burn::module::Module;
 use burn::tensor::Tensor;
-use gb_core::BackendKind;
+use gb_core::{BackendKind, Precision};
 use gb_diffusion::checkpoint::hub::{self, is_hub_id};
 use gb_diffusion::checkpoint::{keymap, DiffusersFolder, WeightVariant};
 use gb_diffusion::clip::load_text_encoder;
 use gb_diffusion::lora::{apply_lora, LoraComponent, LoraFile};
 use gb_diffusion::models::parity as image_parity;
 use gb_diffusion::models::{load_unet_variant, load_vae_variant};
+use gb_diffusion::precision::cast_frozen;
 use gb_diffusion::tensor_file::{read_i64, write_tensors, TensorOut};
 use gb_diffusion::tokenizer::ClipTokenizer;
 
@@ -83,6 +88,9 @@ pub struct Args {
     /// Weight variant.
     #[arg(long, value_enum, default_value_t)]
     pub variant: Variant,
+    /// The precision the network computes in (default f32; f16 needs flex or wgpu).
+    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    pub precision: Precision,
 }
 
 /// Runs the command.
@@ -90,6 +98,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let root = resolve_model(&args.model, args.hub_endpoint.as_deref())?;
     let folder = DiffusersFolder::open(&root)?;
     let device = args.device.unwrap_or_default().device();
+    let precision = Precision::resolve(Some(args.precision), &device).context("--precision")?;
     let variant = match args.variant {
         Variant::Auto => WeightVariant::Auto,
         Variant::Full => WeightVariant::Full,
@@ -108,17 +117,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             run_tokenizer(&folder, &args.inputs)?
         }
-        Component::TextEncoder => {
-            run_text_encoder(&folder, variant, lora.as_ref(), &args.inputs, &device)?
-        }
+        Component::TextEncoder => run_text_encoder(
+            &folder,
+            variant,
+            lora.as_ref(),
+            &args.inputs,
+            precision,
+            &device,
+        )?,
         Component::VaeEncode | Component::VaeDecode => {
             if lora.is_some() {
                 bail!("--lora does not apply to the VAE");
             }
             let encode = matches!(args.component, Component::VaeEncode);
-            run_vae(&root, variant, encode, &args.inputs, &device)?
+            run_vae(&root, variant, encode, &args.inputs, precision, &device)?
         }
-        Component::Unet => run_unet(&root, variant, lora.as_ref(), &args.inputs, &device)?,
+        Component::Unet => run_unet(
+            &root,
+            variant,
+            lora.as_ref(),
+            &args.inputs,
+            precision,
+            &device,
+        )?,
     };
     let named: Vec<(&str, TensorOut)> = outputs.iter().map(|(n, t)| (*n, t.clone())).collect();
     write_tensors(&args.out, &named)?;
@@ -166,6 +187,7 @@ fn run_text_encoder(
     variant: WeightVariant,
     lora: Option<&LoraFile>,
     inputs: &Path,
+    precision: Precision,
     device: &burn::tensor::Device,
 ) -> anyhow::Result<Vec<(&'static str, TensorOut)>> {
     let (ids, shape) = read_i64(inputs, "input_ids")?;
@@ -189,7 +211,7 @@ fn run_text_encoder(
         }
         model = m;
     }
-    let model = model.valid();
+    let model = cast_frozen(model.valid(), precision);
     let out: Tensor<3> = model.forward(model.ids_tensor(&rows, device)?);
     let dims = out.dims().to_vec();
     let values = out
@@ -217,10 +239,11 @@ fn run_vae(
     variant: WeightVariant,
     encode: bool,
     inputs: &Path,
+    precision: Precision,
     device: &burn::tensor::Device,
 ) -> anyhow::Result<Vec<(&'static str, TensorOut)>> {
     let (vae, cfg) = load_vae_variant(root, variant, device)?;
-    let vae = vae.valid();
+    let vae = cast_frozen(vae.valid(), precision);
     Ok(if encode {
         vec![(
             "mean",
@@ -239,6 +262,7 @@ fn run_unet(
     variant: WeightVariant,
     lora: Option<&LoraFile>,
     inputs: &Path,
+    precision: Precision,
     device: &burn::tensor::Device,
 ) -> anyhow::Result<Vec<(&'static str, TensorOut)>> {
     let (mut unet, cfg) = load_unet_variant(root, variant, device)?;
@@ -254,7 +278,7 @@ fn run_unet(
         }
         unet = m;
     }
-    let unet = unet.valid();
+    let unet = cast_frozen(unet.valid(), precision);
     Ok(vec![(
         "out",
         f32_out(image_parity::unet(&unet, &cfg, inputs, device)?)?,

@@ -7,6 +7,7 @@ use burn::tensor::{Device, Tensor};
 use super::attention::ClipAttention;
 use super::mlp::ClipMlp;
 use crate::config::ClipTextConfig;
+use crate::precision::layer_norm_f32;
 
 /// `encoder.layers.N`: `x + attn(ln1(x))`, then `x + mlp(ln2(x))`.
 #[derive(Module, Debug)]
@@ -39,8 +40,8 @@ impl ClipEncoderLayer {
 
     /// One residual layer.
     pub fn forward(&self, x: Tensor<3>) -> Tensor<3> {
-        let x = x.clone() + self.self_attn.forward(self.layer_norm1.forward(x));
-        x.clone() + self.mlp.forward(self.layer_norm2.forward(x))
+        let x = x.clone() + self.self_attn.forward(layer_norm_f32(&self.layer_norm1, x));
+        x.clone() + self.mlp.forward(layer_norm_f32(&self.layer_norm2, x))
     }
 }
 

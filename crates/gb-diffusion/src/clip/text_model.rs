@@ -2,12 +2,13 @@
 
 use burn::module::Module;
 use burn::nn::{LayerNorm, LayerNormConfig};
-use burn::tensor::{Device, Int, Tensor, TensorData};
+use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 
 use super::embeddings::ClipTextEmbeddings;
 use super::encoder::ClipEncoder;
 use crate::checkpoint::{keymap, load_module, CheckpointError, DiffusersFolder, WeightVariant};
 use crate::config::ClipTextConfig;
+use crate::precision::{layer_norm_f32, to_dtype};
 
 /// Error loading or running the text encoder.
 #[derive(Debug, thiserror::Error)]
@@ -56,12 +57,13 @@ impl ClipTextModel {
         }
     }
 
-    /// `[batch, seq]` ids to `last_hidden_state` `[batch, seq, hidden]`.
+    /// `[batch, seq]` ids to `last_hidden_state` `[batch, seq, hidden]`, in f32 (computed in
+    /// the weights' precision, [`crate::precision`]).
     pub fn forward(&self, input_ids: Tensor<2, Int>) -> Tensor<3> {
         let tm = &self.text_model;
         let x = tm.embeddings.forward(input_ids);
         let x = tm.encoder.forward(x);
-        tm.final_layer_norm.forward(x)
+        to_dtype(layer_norm_f32(&tm.final_layer_norm, x), DType::F32)
     }
 
     /// Checks a batch of id rows against the vocabulary and position table and builds the

@@ -15,6 +15,7 @@ use crate::clip::ClipPromptEncoder;
 use crate::config::PredictionType;
 use crate::models::{AutoencoderKL, UNet2DConditionModel};
 use crate::pipeline::SdComponents;
+use crate::precision::{cast_frozen, Precision};
 
 /// The SD U-Net as a noise predictor. A 9-channel (inpainting) U-Net receives
 /// `[x_t, mask, masked_image_latents]`; a 4-channel one only `x_t`. A v-prediction U-Net's
@@ -131,8 +132,18 @@ pub struct SdPrior {
 
 impl SdPrior {
     /// Loads a diffusers folder ([`SdComponents::load`]): the U-Net and text encoder on
-    /// `device`, the VAE on its autodiff version.
+    /// `device`, the VAE on its autodiff version, in the device's default precision
+    /// ([`Precision::default_for`]).
     pub fn load(root: &Path, device: &Device) -> Result<Self, DistillError> {
+        Self::load_with_precision(root, Precision::default_for(device), device)
+    }
+
+    /// [`Self::load`], the networks computing in `precision` ([`crate::precision`]).
+    pub fn load_with_precision(
+        root: &Path,
+        precision: Precision,
+        device: &Device,
+    ) -> Result<Self, DistillError> {
         let c = SdComponents::load(root, device, &device.clone().autodiff()).map_err(|e| {
             DistillError::Load {
                 component: e.component,
@@ -144,13 +155,17 @@ impl SdPrior {
         let (factor, resolution) = (c.vae_factor(), c.resolution());
         Ok(Self {
             unet: SdUnetEps::new(
-                c.unet,
+                cast_frozen(c.unet, precision),
                 c.unet_config.in_channels,
                 c.scheduler.prediction_type,
                 alphas.clone(),
             ),
-            encoder: SdVaeEncoder::new(c.vae.no_grad(), factor),
-            text: ClipPromptEncoder::new(c.tokenizer, c.text_encoder, device.clone()),
+            encoder: SdVaeEncoder::new(cast_frozen(c.vae, precision).no_grad(), factor),
+            text: ClipPromptEncoder::new(
+                c.tokenizer,
+                cast_frozen(c.text_encoder, precision),
+                device.clone(),
+            ),
             alphas,
             resolution,
         })

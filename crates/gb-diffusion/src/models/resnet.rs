@@ -7,6 +7,7 @@ use burn::tensor::activation::silu;
 use burn::tensor::{Device, Tensor};
 
 use super::layers::{conv, group_norm, linear};
+use crate::precision::group_norm_f32;
 
 /// `norm1 -> SiLU -> conv1 (+ time_emb_proj(SiLU(temb))) -> norm2 -> SiLU -> conv2`, plus the
 /// input (through `conv_shortcut` when the channel count changes), divided by
@@ -61,13 +62,15 @@ impl ResnetBlock2D {
 
     /// `[b, in, h, w]` (and `temb` `[b, temb_ch]`) to `[b, out, h, w]`.
     pub fn forward(&self, x: Tensor<4>, temb: Option<&Tensor<2>>) -> Tensor<4> {
-        let mut h = self.conv1.forward(silu(self.norm1.forward(x.clone())));
+        let mut h = self
+            .conv1
+            .forward(silu(group_norm_f32(&self.norm1, x.clone())));
         if let (Some(proj), Some(temb)) = (&self.time_emb_proj, temb) {
             let t = proj.forward(silu(temb.clone()));
             let [b, c] = t.dims();
             h = h + t.reshape([b, c, 1, 1]);
         }
-        let h = self.conv2.forward(silu(self.norm2.forward(h)));
+        let h = self.conv2.forward(silu(group_norm_f32(&self.norm2, h)));
         let skip = match &self.conv_shortcut {
             Some(c) => c.forward(x),
             None => x,

@@ -9,6 +9,7 @@ use burn::tensor::{Device, Tensor};
 
 use super::attention::Attention;
 use super::layers::{conv, from_tokens, group_norm, linear, to_tokens};
+use crate::precision::{group_norm_f32, layer_norm_f32};
 
 /// `ff.net.0`: `proj` to twice the inner width, then `hidden * gelu(gate)`.
 #[derive(Module, Debug)]
@@ -77,12 +78,18 @@ impl BasicTransformerBlock {
 
     /// `[b, n, dim]` with context `[b, m, context_dim]`.
     pub fn forward(&self, x: Tensor<3>, context: &Tensor<3>) -> Tensor<3> {
-        let x = self.attn1.forward(self.norm1.forward(x.clone()), None) + x;
         let x = self
-            .attn2
-            .forward(self.norm2.forward(x.clone()), Some(context.clone()))
+            .attn1
+            .forward(layer_norm_f32(&self.norm1, x.clone()), None)
             + x;
-        let h = self.ff.net_0.forward(self.norm3.forward(x.clone()));
+        let x = self.attn2.forward(
+            layer_norm_f32(&self.norm2, x.clone()),
+            Some(context.clone()),
+        ) + x;
+        let h = self
+            .ff
+            .net_0
+            .forward(layer_norm_f32(&self.norm3, x.clone()));
         self.ff.net_2.forward(h) + x
     }
 }
@@ -159,7 +166,7 @@ impl Transformer2DModel {
     pub fn forward(&self, x: Tensor<4>, context: &Tensor<3>) -> Tensor<4> {
         let [_, _, h, w] = x.dims();
         let residual = x.clone();
-        let x = self.norm.forward(x);
+        let x = group_norm_f32(&self.norm, x);
         let mut t = match (&self.proj_in, &self.proj_in_linear) {
             (Some(c), _) => to_tokens(c.forward(x)),
             (None, Some(l)) => l.forward(to_tokens(x)),

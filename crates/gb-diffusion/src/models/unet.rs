@@ -5,7 +5,7 @@ use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::nn::GroupNorm;
 use burn::tensor::activation::silu;
-use burn::tensor::{Device, Tensor};
+use burn::tensor::{DType, Device, Tensor};
 
 use super::embeddings::{timestep_embedding, TimestepEmbedding};
 use super::layers::{conv, group_norm};
@@ -13,6 +13,7 @@ use super::resnet::{ResnetBlock2D, ResnetSpec};
 use super::transformer::{Transformer2DModel, TransformerSpec};
 use super::unet_blocks::{DownBlock, Downsample2D, MidBlockCrossAttn, UpBlock, Upsample2D};
 use crate::config::UNet2DConditionConfig;
+use crate::precision::{compute_dtype, group_norm_f32, to_dtype};
 
 /// The conditional U-Net: predicts noise (or v) from a noisy latent, a timestep and text
 /// embeddings.
@@ -172,7 +173,8 @@ impl UNet2DConditionModel {
 
     /// Predicts noise: `sample` `[b, in_channels, h, w]` (h and w divisible by
     /// `2^(levels-1)`), `timesteps` one per batch item (or one for all), text embeddings
-    /// `[b, m, cross_attention_dim]`. Returns `[b, out_channels, h, w]`.
+    /// `[b, m, cross_attention_dim]`. Returns `[b, out_channels, h, w]` in f32; inside it
+    /// computes in its weights' precision ([`crate::precision`]).
     pub fn forward(
         &self,
         sample: Tensor<4>,
@@ -193,10 +195,11 @@ impl UNet2DConditionModel {
             self.freq_shift,
             &device,
         );
-        let emb = self.time_embedding.forward(t_emb);
-        let ctx = encoder_hidden_states;
+        let dtype = compute_dtype(&self.conv_in.weight);
+        let emb = self.time_embedding.forward(to_dtype(t_emb, dtype));
+        let ctx = to_dtype(encoder_hidden_states, dtype);
 
-        let mut x = self.conv_in.forward(sample);
+        let mut x = self.conv_in.forward(to_dtype(sample, dtype));
         let mut skips = vec![x.clone()];
         for block in &self.down_blocks {
             x = block.forward(x, Some(&emb), Some(&ctx), &mut skips);
@@ -205,6 +208,9 @@ impl UNet2DConditionModel {
         for block in &self.up_blocks {
             x = block.forward(x, Some(&emb), Some(&ctx), Some(&mut skips));
         }
-        self.conv_out.forward(silu(self.conv_norm_out.forward(x)))
+        let out = self
+            .conv_out
+            .forward(silu(group_norm_f32(&self.conv_norm_out, x)));
+        to_dtype(out, DType::F32)
     }
 }

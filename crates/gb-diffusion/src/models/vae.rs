@@ -8,13 +8,14 @@ use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::nn::{GroupNorm, Linear};
 use burn::tensor::activation::silu;
-use burn::tensor::{Device, Tensor};
+use burn::tensor::{DType, Device, Tensor};
 
 use super::attention::scaled_dot_product;
 use super::layers::{conv, from_tokens, group_norm, linear, to_tokens};
 use super::resnet::{ResnetBlock2D, ResnetSpec};
 use super::unet_blocks::{DownBlock, Downsample2D, UpBlock, Upsample2D};
 use crate::config::AutoencoderKLConfig;
+use crate::precision::{compute_dtype, group_norm_f32, to_dtype};
 
 /// Group-norm epsilon everywhere in the VAE.
 const VAE_EPS: f64 = 1e-6;
@@ -51,7 +52,7 @@ impl VaeAttention {
     /// `[b, c, h, w]` to `[b, c, h, w]`.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let [_, _, h, w] = x.dims();
-        let t = to_tokens(self.group_norm.forward(x.clone()));
+        let t = to_tokens(group_norm_f32(&self.group_norm, x.clone()));
         let q = self.to_q.forward(t.clone());
         let k = self.to_k.forward(t.clone());
         let v = self.to_v.forward(t);
@@ -169,7 +170,8 @@ impl Encoder {
             unused.clear();
         }
         x = self.mid_block.forward(x);
-        self.conv_out.forward(silu(self.conv_norm_out.forward(x)))
+        self.conv_out
+            .forward(silu(group_norm_f32(&self.conv_norm_out, x)))
     }
 }
 
@@ -226,7 +228,8 @@ impl Decoder {
         for block in &self.up_blocks {
             x = block.forward(x, None, None, None);
         }
-        self.conv_out.forward(silu(self.conv_norm_out.forward(x)))
+        self.conv_out
+            .forward(silu(group_norm_f32(&self.conv_norm_out, x)))
     }
 }
 
@@ -267,11 +270,14 @@ impl AutoencoderKL {
 
     /// Mean and log-variance of the latent distribution, each `[b, latent, h / f, w / f]`,
     /// unscaled. Differentiable when the module and `image` live on an autodiff device.
+    /// Computes in the weights' precision and returns f32 ([`crate::precision`]).
     pub fn encode_moments(&self, image: Tensor<4>) -> (Tensor<4>, Tensor<4>) {
-        let mut m = self.encoder.forward(image);
+        let dtype = compute_dtype(&self.encoder.conv_in.weight);
+        let mut m = self.encoder.forward(to_dtype(image, dtype));
         if let Some(q) = &self.quant_conv {
             m = q.forward(m);
         }
+        let m = to_dtype(m, DType::F32);
         let l = self.latent_channels;
         let mean = m.clone().narrow(1, 0, l);
         let logvar = m.narrow(1, l, l).clamp(-30.0, 20.0);
@@ -283,12 +289,14 @@ impl AutoencoderKL {
         self.encode_moments(image).0
     }
 
-    /// Decodes unscaled latents to an image in about `[-1, 1]`.
+    /// Decodes unscaled latents to an image in about `[-1, 1]`, in the weights' precision;
+    /// returns f32.
     pub fn decode(&self, latents: Tensor<4>) -> Tensor<4> {
+        let latents = to_dtype(latents, compute_dtype(&self.decoder.conv_in.weight));
         let z = match &self.post_quant_conv {
             Some(p) => p.forward(latents),
             None => latents,
         };
-        self.decoder.forward(z)
+        to_dtype(self.decoder.forward(z), DType::F32)
     }
 }

@@ -4,12 +4,12 @@
 use std::path::PathBuf;
 
 use burn::module::Module;
-use gb_core::{read_gray, read_rgb, BackendKind};
+use gb_core::{read_gray, read_rgb, BackendKind, Precision};
 use gb_diffusion::distill::gradient::surrogate_loss;
 use gb_diffusion::distill::sd_adapter::{SdPrior, SdVaeEncoder};
 use gb_diffusion::distill::{
-    distill_view, DistillSettings, GuidanceMethod, LatentEncoder, PriorInputMode, PriorModels,
-    PromptCache, ScoreDistiller, ViewConditioning,
+    distill_view, DistillSettings, GuidanceMethod, LatentEncoder, LatentTarget, PriorInputMode,
+    PriorModels, PromptCache, ScoreDistiller, ViewConditioning,
 };
 use gb_diffusion::models::load_vae;
 
@@ -164,4 +164,85 @@ fn one_step_of_each_method_on_the_tiny_inpainting_prior() {
     }
     // Three distinct prompts: "a wooden bench", "" and "blurry".
     assert_eq!(cache.len(), 3);
+}
+
+/// The render's gradient from one step of `method` at `t` on the tiny inpainting prior in
+/// `precision` (flex), with its latent gradient norm.
+fn render_gradient(precision: Precision, method: &GuidanceMethod, t: f64) -> (Vec<f32>, f64) {
+    let device = BackendKind::Flex.device();
+    let prior = SdPrior::load_with_precision(&fixture("pipeline"), precision, &device).unwrap();
+    let (h, w) = (32, 32);
+    let ad = device.clone().autodiff();
+    let gt = tensor(rand01(7, 3 * h * w), [1, 3, h, w], &device);
+    let mask: Vec<f32> = (0..h * w)
+        .map(|i| if i % w >= w / 2 { 1.0 } else { 0.0 })
+        .collect();
+    let view = ViewConditioning::new(
+        0,
+        &prior.encoder,
+        gt,
+        tensor(mask, [1, 1, h, w], &device),
+        32,
+    )
+    .unwrap();
+    let settings = DistillSettings {
+        guidance: method.clone(),
+        ..DistillSettings::paper_rgb()
+    };
+    let mut d = ScoreDistiller::new(&settings, prior.alphas.clone(), 3).unwrap();
+    let prompts = PromptCache::new()
+        .for_guidance(&prior.text, d.guidance(), "a wooden bench", "blurry")
+        .unwrap();
+    let render = tensor(rand01(61, 3 * h * w), [1, 3, h, w], &ad).require_grad();
+    let target = LatentTarget {
+        latents: prior
+            .encoder
+            .encode(render.clone().mul_scalar(2.0).sub_scalar(1.0))
+            .unwrap(),
+        mask_latent: view.mask_latent.clone(),
+        masked_image_latents: view.masked_image_latents.clone(),
+        prompts: &prompts,
+    };
+    let out = d.step_at(&prior.unet, target, t).unwrap();
+    let norm = out.diagnostics.grad_norm;
+    (host(render.grad(&out.loss.backward()).expect("grad")), norm)
+}
+
+/// f16 at the extremes of the guidance: t = 0.02 and 0.98 with weights of 100. The image
+/// gradient stays finite, and points the way the f32 one does (cosine above 0.95; the step's
+/// gradient norm within 5%).
+#[test]
+fn f16_guidance_at_t_and_weight_extremes_stays_finite_and_follows_f32() {
+    for method in [
+        GuidanceMethod::Bsd {
+            w1: 100.0,
+            w2: 99.0,
+        },
+        GuidanceMethod::Sds {
+            guidance_scale: 100.0,
+        },
+    ] {
+        for t in [0.02, 0.98] {
+            let (g16, n16) = render_gradient(Precision::F16, &method, t);
+            let (g32, n32) = render_gradient(Precision::F32, &method, t);
+            assert!(
+                g16.iter().all(|v| v.is_finite()),
+                "{method:?} t={t}: non-finite"
+            );
+            let dot: f64 = g16
+                .iter()
+                .zip(&g32)
+                .map(|(a, b)| (*a as f64) * (*b as f64))
+                .sum();
+            let norm = |g: &[f32]| g.iter().map(|v| (*v as f64).powi(2)).sum::<f64>().sqrt();
+            let cosine = dot / (norm(&g16) * norm(&g32));
+            let norm_err = ((n16 - n32) / n32).abs();
+            println!(
+                "{method:?} t={t}: cosine {cosine:.5}, latent-gradient norm {n16:.4e} vs {n32:.4e}"
+            );
+            assert!(norm(&g32) > 0.0, "{method:?} t={t}: no f32 gradient");
+            assert!(cosine > 0.95, "{method:?} t={t}: cosine {cosine}");
+            assert!(norm_err < 0.05, "{method:?} t={t}: norm {n16} vs {n32}");
+        }
+    }
 }

@@ -18,7 +18,8 @@ mod test_views;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use gb_core::BackendKind;
+use burn::tensor::Device;
+use gb_core::{BackendKind, Precision};
 use gb_eval::suite::{evaluate, PairSet, SuiteOptions};
 use gb_nerf::train::DepthSupervision;
 
@@ -54,6 +55,8 @@ pub struct RunSpec {
     pub prompts: PromptOverrides,
     /// The compute backend.
     pub device: BackendKind,
+    /// The prior's precision (`--precision`); `None`: f16 on a GPU card, f32 elsewhere.
+    pub precision: Option<Precision>,
     /// Overrides the preset's training seed.
     pub seed: Option<u64>,
     /// Overrides the preset's number of steps.
@@ -89,6 +92,7 @@ impl Default for RunSpec {
             lora: None,
             prompts: PromptOverrides::default(),
             device: BackendKind::default(),
+            precision: None,
             seed: None,
             steps: None,
             depth: None,
@@ -132,11 +136,25 @@ fn load_prior(
     let dir = gb_diffusion::checkpoint::resolve_prior(prior_spec)?;
     let lora = lora_for(method, &dir, spec.lora.as_deref())?;
     tracing::info!(prior = %dir.display(), lora = ?lora, "loading the prior");
-    Ok(Some(GuidancePrior::load(
+    let device = spec.device.device();
+    let precision = prior_precision(spec, &device)?;
+    tracing::info!(%precision, "prior precision");
+    Ok(Some(GuidancePrior::load_personalized(
         &dir,
         lora.as_deref(),
-        &spec.device.device(),
+        None,
+        precision,
+        &device,
     )?))
+}
+
+/// The precision of the run's prior: `--precision` when the device has it, else the device's
+/// default; f16 on a backend without f16 tensors is an error naming the flag.
+fn prior_precision(spec: &RunSpec, device: &Device) -> Result<Precision, InpaintError> {
+    Precision::resolve(spec.precision, device).map_err(|e| InpaintError::Spec {
+        field: "--precision".into(),
+        reason: e.to_string(),
+    })
 }
 
 /// Personalises `prior` to the scene when the method asks for it ([`crate::personalize`]):
@@ -174,6 +192,7 @@ fn personalize_prior(
         &info.folder,
         info.lora.as_deref(),
         Some(&spec.out.join(&report.lora)),
+        info.precision,
         &spec.device.device(),
     )?);
     Ok(Some(report))
