@@ -21,6 +21,7 @@ fn devices_lists_flex_as_working() {
     assert!(out.status.success());
     let s = String::from_utf8_lossy(&out.stdout);
     assert!(s.contains("flex") && s.contains("ok"), "{s}");
+    assert!(s.contains("prior precision f32 by default"), "{s}");
 }
 
 #[test]

@@ -120,6 +120,11 @@ fn runs(
         assert!(cfg.contains(key), "config.toml lacks {key}:\n{cfg}");
     }
     assert!(cfg.contains(&format!("name = \"{method}\"")), "{cfg}");
+    if prior.is_some() {
+        // flex's default precision, in the prior's table and in the reproducing command
+        assert!(cfg.contains("precision = \"f32\""), "{cfg}");
+        assert!(cfg.contains(" --precision f32"), "{cfg}");
+    }
     assert!(out.join("checkpoint.bin").is_file());
     assert!(out.join("renders/view_000_rgb.png").is_file());
 }

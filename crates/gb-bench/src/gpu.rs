@@ -4,7 +4,8 @@
 //! Without `--smoke` (on the GPU machine) it first makes what it needs:
 //! - the Vulkan loader (`libvulkan1`, through apt when missing; the NVIDIA driver brings its
 //!   own ICD) and a venv with the pinned torch and diffusers (`tools/bench/gpu_setup.sh`);
-//! - a release build: from a debug build it re-runs itself with `cargo run --release`.
+//! - a release build with Burn's `vulkan` feature (SPIR-V; the WGSL build when it fails to
+//!   build): from a debug build it re-runs itself with `cargo run --release`.
 //!
 //! Then it measures, on `--device` (wgpu by default):
 //! - the U-Net forward at SD-1.5-inpainting shapes (batch 2, 64x64 latent, random weights),
@@ -169,6 +170,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "machine": machine_description(),
         "gpu": gpu_label,
         "device": kind.name(),
+        "wgpu_compiler": WGPU_COMPILER,
         "profile": if cfg!(debug_assertions) { "dev (deps at opt-level 3)" } else { "release" },
         "unet": {
             "shape": if args.smoke { "the tiny prior's U-Net" } else { "SD-1.5-inpainting (859.5M parameters, random weights)" },
@@ -216,6 +218,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The shader compiler `--device wgpu` uses on a Vulkan adapter in this build.
+pub const WGPU_COMPILER: &str = if cfg!(feature = "vulkan") {
+    "spir-v (the `vulkan` feature: cooperative-matrix matmul and implicit-GEMM convolutions for f16)"
+} else {
+    "wgsl (the default build; `--features vulkan` selects SPIR-V)"
+};
+
 /// The venv `tools/bench/gpu_setup.sh` makes.
 const VENV_PYTHON: &str = ".venv-gpu/bin/python";
 
@@ -232,8 +241,30 @@ fn setup_then_rerun(args: &Args) -> anyhow::Result<()> {
             bail!("tools/bench/gpu_setup.sh failed ({status})");
         }
     }
-    let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
-    cmd.args(["run", "--quiet", "--release", "--package", "xtask", "--"])
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    // Burn's `vulkan` feature (SPIR-V, tensor-core matmul and convolutions for f16) when it
+    // builds and its first kernels run on this adapter (Mesa 22.3's lavapipe crashes creating
+    // a SPIR-V pipeline); otherwise the default WGSL build, with a warning
+    let with_vulkan = |args: &[&str]| {
+        Command::new(&cargo)
+            .args(["run", "--quiet", "--release", "--package", "xtask"])
+            .args(["--features", "vulkan", "--"])
+            .args(args)
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    let vulkan = with_vulkan(&["devices", "--device", args.device.name()]);
+    if !vulkan {
+        tracing::warn!(
+            "the `vulkan` feature did not build or run on this adapter: measuring the WGSL build"
+        );
+    }
+    let mut cmd = Command::new(&cargo);
+    cmd.args(["run", "--quiet", "--release", "--package", "xtask"]);
+    if vulkan {
+        cmd.args(["--features", "vulkan"]);
+    }
+    cmd.arg("--")
         .args(["bench", "gpu", "--no-setup", "--device", args.device.name()]);
     if let Some(out) = &args.out {
         cmd.arg("--out").arg(out);

@@ -1,7 +1,7 @@
 //! `cargo xtask devices`: which backends work on this machine.
 
 use burn::tensor::Tensor;
-use gb_core::BackendKind;
+use gb_core::{BackendKind, Precision};
 
 /// Arguments of `cargo xtask devices`.
 #[derive(clap::Args)]
@@ -11,7 +11,8 @@ pub struct Args {
     device: Option<BackendKind>,
 }
 
-/// Runs a small matrix product on each backend and prints the result and the time.
+/// Runs a small matrix product on each backend and prints the result, the time, the prior's
+/// default precision there, and wgpu's shader compiler.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let kinds = match args.device {
         Some(k) => vec![k],
@@ -23,16 +24,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let device = kind.device();
             let a = Tensor::<2>::ones([64, 64], &device);
             let s: f32 = a.clone().matmul(a).sum().into_scalar::<f32>();
-            s
+            (s, Precision::default_for(&device))
         });
         match outcome {
-            Ok(s) if s == 64.0 * 64.0 * 64.0 => {
+            Ok((s, precision)) if s == 64.0 * 64.0 * 64.0 => {
                 println!(
-                    "{kind:8} ok   ({:.1} ms)",
+                    "{kind:8} ok   ({:.1} ms; prior precision {precision} by default)",
                     start.elapsed().as_secs_f64() * 1e3
-                )
+                );
+                if kind == BackendKind::Wgpu {
+                    println!("         shaders: {}", gb_bench::gpu::WGPU_COMPILER);
+                }
             }
-            Ok(s) => println!("{kind:8} WRONG result {s}"),
+            Ok((s, _)) => println!("{kind:8} WRONG result {s}"),
             Err(_) => println!("{kind:8} unavailable (see the log above)"),
         }
     }

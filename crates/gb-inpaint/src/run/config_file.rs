@@ -81,6 +81,7 @@ pub fn write_config(spec: &RunSpec, r: &ResolvedRun) -> Result<(), InpaintError>
             if let Some(l) = &p.lora {
                 cmd.push(format!("--lora {}", shell_quote(&l.display().to_string())));
             }
+            cmd.push(format!("--precision {}", p.precision));
         }
         None => cmd.push("--prior none".into()),
     }
