@@ -4,8 +4,9 @@
 //! Without `--smoke` (on the GPU machine) it first makes what it needs:
 //! - the Vulkan loader (`libvulkan1`, through apt when missing; the NVIDIA driver brings its
 //!   own ICD) and a venv with the pinned torch and diffusers (`tools/bench/gpu_setup.sh`);
-//! - a release build with Burn's `vulkan` feature (SPIR-V; the WGSL build when it fails to
-//!   build): from a debug build it re-runs itself with `cargo run --release`.
+//! - a release build with Burn's `vulkan` feature (SPIR-V; the default WGSL build when that
+//!   fails to build or to run a first kernel): from a debug build it re-runs itself with
+//!   `cargo run --release`.
 //!
 //! Then it measures, on `--device` (wgpu by default):
 //! - the U-Net forward at SD-1.5-inpainting shapes (batch 2, 64x64 latent, random weights),
@@ -245,15 +246,18 @@ fn setup_then_rerun(args: &Args) -> anyhow::Result<()> {
     // Burn's `vulkan` feature (SPIR-V, tensor-core matmul and convolutions for f16) when it
     // builds and its first kernels run on this adapter (Mesa 22.3's lavapipe crashes creating
     // a SPIR-V pipeline); otherwise the default WGSL build, with a warning
-    let with_vulkan = |args: &[&str]| {
-        Command::new(&cargo)
-            .args(["run", "--quiet", "--release", "--package", "xtask"])
-            .args(["--features", "vulkan", "--"])
-            .args(args)
-            .status()
-            .is_ok_and(|s| s.success())
-    };
-    let vulkan = with_vulkan(&["devices", "--device", args.device.name()]);
+    let vulkan = Command::new(&cargo)
+        .args(["run", "--quiet", "--release", "--package", "xtask"])
+        .args([
+            "--features",
+            "vulkan",
+            "--",
+            "devices",
+            "--device",
+            args.device.name(),
+        ])
+        .status()
+        .is_ok_and(|s| s.success());
     if !vulkan {
         tracing::warn!(
             "the `vulkan` feature did not build or run on this adapter: measuring the WGSL build"

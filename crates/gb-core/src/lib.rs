@@ -1,8 +1,9 @@
 //! Shared plumbing used by every gb-nerf-rs crate: run-time backend selection
 //! ([`backend`]), crash-safe file writes ([`atomic`]), PNG/JPEG image IO ([`image_io`]),
 //! progress bars that do not fight the log ([`progress`]), one-line error messages
-//! ([`messages`]), the prior's float precision ([`precision`]), row lookups with a parallel backward ([`indexing`]) and, with the
-//! `clap` feature, the command lines' value parsers (`cli`).
+//! ([`messages`]), the prior's float precision ([`precision`]), row lookups with a parallel
+//! backward ([`indexing`]) and, with the `clap` feature, the command lines' value parsers
+//! (`cli`).
 
 pub mod assets;
 pub mod atomic;

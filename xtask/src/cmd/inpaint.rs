@@ -4,8 +4,9 @@
 //! ```text
 //! cargo xtask inpaint [--scene DIR] [--method M] [--preset P] [--prior none|tiny|DIR|HUB_ID]
 //!     [--lora FILE] [--prompt P] [--negative-prompt N] [--normal-prompt G] [--device D]
-//!     [--precision f32|f16] [--out DIR] [--resume] [--steps N] [--seed N] [--depth sparse|dense|none]
-//!     [--personalize STEPS] [--baseline DIR] [--weights DIR] [--orbit-frames N]
+//!     [--precision f32|f16] [--out DIR] [--resume] [--steps N] [--seed N]
+//!     [--depth sparse|dense|none] [--personalize STEPS] [--baseline DIR] [--weights DIR]
+//!     [--orbit-frames N]
 //! ```
 //!
 //! - `--method`: a built-in method (`configs/methods/`: gb-nerf, gb-nerf-unseen, bsd,
