@@ -152,10 +152,18 @@ fn torch_reference(
         hidden,
         geo_features,
         dir_freqs,
+        ..
     } = &cfg.field
     else {
         anyhow::bail!("the PyTorch reference covers hash fields only");
     };
+    if let FieldConfig::Hash { density_bias, .. } = &cfg.field {
+        if *density_bias != 0.0 {
+            anyhow::bail!(
+                "the PyTorch reference has no density bias (density_bias = {density_bias})"
+            );
+        }
+    }
     let conf = json!({
         "levels": grid.levels, "features_per_level": grid.features_per_level,
         "log2_table_size": grid.log2_table_size, "base_resolution": grid.base_resolution,

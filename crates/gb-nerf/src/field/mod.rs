@@ -21,6 +21,10 @@ pub use positional::{positional_dim, positional_encoding};
 /// The largest raw density logit; `sigma = exp(clamp(raw, -15, 15))` ("truncated exp").
 const MAX_LOG_DENSITY: f32 = 15.0;
 
+fn is_zero(v: &f32) -> bool {
+    *v == 0.0
+}
+
 /// Which field to build, with its sizes.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
@@ -35,6 +39,12 @@ pub enum FieldConfig {
         geo_features: usize,
         /// Positional-encoding frequencies of the view direction.
         dir_freqs: usize,
+        /// Added to the raw density logit, `sigma = exp(raw + bias)` (TOML `density_bias`,
+        /// default 0). A negative bias starts the field nearly empty (the raw logit starts
+        /// near 0, so `sigma` starts near `exp(bias)` everywhere) for the occupancy grid to
+        /// skip; nerfacc's instant-ngp example uses -1.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        density_bias: f32,
     },
     /// The original NeRF MLP on positionally encoded inputs.
     Vanilla {
@@ -58,6 +68,7 @@ impl FieldConfig {
                 hidden,
                 geo_features,
                 dir_freqs,
+                ..
             } => NerfField {
                 grid: Some(grid.init(device)),
                 density_net: Mlp::new(
@@ -162,8 +173,14 @@ impl NerfField {
         self.density_net.forward(enc)
     }
 
-    fn activate_density(raw: Tensor<2>) -> Tensor<1> {
+    fn activate_density(&self, raw: Tensor<2>) -> Tensor<1> {
         let n = raw.dims()[0];
+        let raw = match self.config {
+            FieldConfig::Hash { density_bias, .. } if density_bias != 0.0 => {
+                raw.add_scalar(density_bias)
+            }
+            _ => raw,
+        };
         raw.clamp(-MAX_LOG_DENSITY, MAX_LOG_DENSITY)
             .exp()
             .reshape([n])
@@ -175,7 +192,7 @@ impl NerfField {
             return Tensor::zeros([0], &self.device());
         }
         let h = self.trunk(points);
-        Self::activate_density(h.narrow(1, 0, 1))
+        self.activate_density(h.narrow(1, 0, 1))
     }
 
     /// Density `[N]` and colour `[N, 3]` at `points` seen along unit world `dirs`.
@@ -187,7 +204,7 @@ impl NerfField {
         }
         let h = self.trunk(points);
         let width = h.dims()[1];
-        let sigma = Self::activate_density(h.clone().narrow(1, 0, 1));
+        let sigma = self.activate_density(h.clone().narrow(1, 0, 1));
         let geo = h.narrow(1, 1, width - 1);
         let d = positional_encoding(points_tensor(dirs, &device), self.config.dir_freqs());
         let rgb = sigmoid(self.color_net.forward(Tensor::cat(vec![geo, d], 1)));
@@ -210,6 +227,7 @@ pub(crate) fn tiny_hash_config() -> FieldConfig {
         hidden: 16,
         geo_features: 7,
         dir_freqs: 2,
+        density_bias: 0.0,
     }
 }
 
@@ -244,5 +262,35 @@ mod tests {
                 assert!((d[i] - s[i]).abs() <= 1e-6 * s[i].abs().max(1.0));
             }
         }
+    }
+
+    /// `density_bias` scales the density by `exp(bias)` and leaves the colour alone; a config
+    /// without the key reads as 0 and is written without it.
+    #[test]
+    fn density_bias_scales_the_density_and_defaults_to_zero() {
+        let device = gb_core::BackendKind::Flex.device();
+        let plain = tiny_hash_config().init(&device);
+        let mut biased = plain.clone();
+        if let FieldConfig::Hash { density_bias, .. } = &mut biased.config {
+            *density_bias = -3.0;
+        }
+        let pts = [[0.1, 0.2, 0.3], [0.9, 0.5, 0.0]];
+        let dirs = [[0.0, 0.0, -1.0]; 2];
+        let values = |t: Tensor<1>| t.into_data().try_to_vec::<f32>().unwrap();
+        let (s0, c0) = plain.forward(&pts, &dirs);
+        let (s1, c1) = biased.forward(&pts, &dirs);
+        for (a, b) in values(s0).iter().zip(values(s1)) {
+            let want = a * (-3f32).exp();
+            assert!((b - want).abs() <= 1e-5 * want, "{b} vs {want}");
+        }
+        let flat = |t: Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
+        assert_eq!(flat(c0), flat(c1));
+
+        let text = toml::to_string(&tiny_hash_config()).unwrap();
+        assert!(!text.contains("density_bias"), "{text}");
+        let back: FieldConfig = toml::from_str(&text).unwrap();
+        assert_eq!(back, tiny_hash_config());
+        let with: FieldConfig = toml::from_str(&format!("density_bias = -1.0\n{text}")).unwrap();
+        assert!(matches!(with, FieldConfig::Hash { density_bias, .. } if density_bias == -1.0));
     }
 }

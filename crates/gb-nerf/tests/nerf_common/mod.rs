@@ -103,5 +103,6 @@ pub fn tiny_hash() -> FieldConfig {
         hidden: 16,
         geo_features: 3,
         dir_freqs: 1,
+        density_bias: 0.0,
     }
 }
