@@ -242,7 +242,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?,
         spec => {
             let dir = gb_diffusion::checkpoint::resolve_prior(spec)?;
-            GuidancePrior::load_personalized(&dir, None, None, precision, &device)?
+            GuidancePrior::load(&dir, None, precision, &device)?
         }
     };
     let build_s = build.elapsed().as_secs_f64();

@@ -132,14 +132,18 @@ pub struct GuidancePrior {
 
 impl GuidancePrior {
     /// Loads the prior folder `root` on `device` (the plain device of the run's backend) in
-    /// the device's default precision and attaches `lora` (see the module docs).
-    pub fn load(root: &Path, lora: Option<&Path>, device: &Device) -> Result<Self, InpaintError> {
-        Self::load_personalized(root, lora, None, Precision::default_for(device), device)
+    /// `precision` and attaches `lora` (see the module docs).
+    pub fn load(
+        root: &Path,
+        lora: Option<&Path>,
+        precision: Precision,
+        device: &Device,
+    ) -> Result<Self, InpaintError> {
+        Self::load_personalized(root, lora, None, precision, device)
     }
 
-    /// [`Self::load`] in `precision`, then the per-scene LoRA `personal`
-    /// ([`crate::personalize`], trained on top of the prior with `lora` merged) merged as
-    /// well.
+    /// [`Self::load`], then the per-scene LoRA `personal` ([`crate::personalize`], trained on
+    /// top of the prior with `lora` merged) merged as well.
     pub fn load_personalized(
         root: &Path,
         lora: Option<&Path>,

@@ -67,7 +67,9 @@ fn guided(
     let mut m = MethodConfig::builtin(method).unwrap();
     edit(&mut m);
     let guidance = m.needs_prior().then(|| {
-        let prior = GuidancePrior::load(&prior_dir(), None, &KIND.device()).unwrap();
+        let prior =
+            GuidancePrior::load(&prior_dir(), None, gb_core::Precision::F32, &KIND.device())
+                .unwrap();
         let prompts = m.resolve_prompts(&SceneCaptions::read(dir), &PromptOverrides::default());
         (prior, prompts)
     });

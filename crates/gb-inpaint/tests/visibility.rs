@@ -63,7 +63,8 @@ fn trainer(scene: &Scene, dir: &Path, steps: usize, observed_weight: f64) -> Gui
         resolution: 32,
         ..VisibilityConfig::default()
     };
-    let prior = GuidancePrior::load(&prior_dir(), None, &KIND.device()).unwrap();
+    let prior =
+        GuidancePrior::load(&prior_dir(), None, gb_core::Precision::F32, &KIND.device()).unwrap();
     let prompts = m.resolve_prompts(&SceneCaptions::read(dir), &PromptOverrides::default());
     let mut c = NerfConfig::preset("fast").unwrap();
     c.train.steps = steps;

@@ -139,10 +139,9 @@ fn load_prior(
     let device = spec.device.device();
     let precision = prior_precision(spec, &device)?;
     tracing::info!(%precision, "prior precision");
-    Ok(Some(GuidancePrior::load_personalized(
+    Ok(Some(GuidancePrior::load(
         &dir,
         lora.as_deref(),
-        None,
         precision,
         &device,
     )?))
