@@ -2,7 +2,7 @@
 """Proves that the shipped tiny prior (assets/tiny-prior) is an ordinary diffusers checkpoint.
 
 diffusers loads assets/tiny-prior as a StableDiffusionInpaintPipeline, runs its text encoder
-and 9-channel U-Net on fixed inputs, then loads the folder's pytorch_lora_weights.safetensors
+and 9-channel inpainting U-Net on fixed inputs, then loads the folder's pytorch_lora_weights.safetensors
 with `load_lora_weights` and runs them again. The inputs and the four outputs are written to
 crates/gb-diffusion/tests/fixtures/tiny_prior_io.safetensors; the Rust test
 crates/gb-diffusion/tests/tiny_prior_parity.rs loads the same folder (and LoRA) with our code
@@ -31,7 +31,7 @@ def main():
     unet, te, tok = pipe.unet, pipe.text_encoder, pipe.tokenizer
     size = unet.config.sample_size
     ids = tok(PROMPTS, padding="max_length", max_length=77, truncation=True, return_tensors="pt").input_ids
-    x = torch.randn(2, 9, size, size)
+    x = torch.randn(2, unet.config.in_channels, size, size)
     t = torch.tensor([700, 80])
     with torch.no_grad():
         ctx = te(ids)[0]

@@ -1,7 +1,8 @@
 //! 2D inpainting with a Stable Diffusion inpainting prior: diffusers'
 //! `StableDiffusionInpaintPipeline` for a 9-channel U-Net (strength 1) with DDIM.
 //!
-//! The U-Net input is `[noisy latent (4), mask at latent size (1), masked-image latent (4)]`.
+//! The U-Net input is `[noisy latent (c), mask at latent size (1), masked-image latent (c)]`,
+//! `c` the VAE's latent channels (4 for Stable Diffusion).
 //! Classifier-free guidance follows diffusers: `eps = eps_uncond + s * (eps_text -
 //! eps_uncond)`, with the negative prompt as the unconditional input, and none when `s <= 1`.
 //! The masked-image latent is the *mean* of the VAE posterior times `scaling_factor`
@@ -37,12 +38,21 @@ pub enum InpaintError {
     #[error(transparent)]
     Scheduler(#[from] SchedulerError),
     /// The U-Net is not an inpainting U-Net.
-    #[error("{path}: in_channels = {found}, an inpainting U-Net needs 9 (4 latent + 1 mask + 4 masked-image latent)")]
+    #[error(
+        "{path}: in_channels = {found} and out_channels = {out}; an inpainting U-Net for the \
+         VAE's {latent} latent channels needs in_channels = {} (latent + mask + masked-image \
+         latent) and out_channels = {latent}",
+        2 * latent + 1
+    )]
     NotInpainting {
         /// The U-Net config file.
         path: String,
         /// Its `in_channels`.
         found: usize,
+        /// Its `out_channels`.
+        out: usize,
+        /// The VAE's `latent_channels`.
+        latent: usize,
     },
     /// Image and mask disagree, or the size does not fit the VAE.
     #[error("{0}")]
@@ -58,7 +68,8 @@ pub struct InpaintPrior {
     pub tokenizer: ClipTokenizer,
     /// CLIP text encoder of `text_encoder/`.
     pub text_encoder: ClipTextModel,
-    /// The 9-channel U-Net of `unet/`.
+    /// The inpainting U-Net of `unet/` (9 input channels for Stable Diffusion's 4-channel
+    /// latents).
     pub unet: UNet2DConditionModel,
     /// Its config.
     pub unet_config: UNet2DConditionConfig,
@@ -74,13 +85,17 @@ pub struct InpaintPrior {
 
 impl InpaintPrior {
     /// Loads every component of a diffusers inpainting folder onto `device`
-    /// ([`SdComponents::load`]); a U-Net without the 9 inpainting channels is refused.
+    /// ([`SdComponents::load`]); a U-Net that is not an inpainting U-Net for the VAE's
+    /// latents is refused.
     pub fn load(root: &Path, device: &Device) -> Result<Self, InpaintError> {
         let c = SdComponents::load(root, device, device)?;
-        if c.unet_config.in_channels != 9 {
+        let latent = c.vae_config.latent_channels;
+        if !c.unet_config.is_inpainting_for(latent) {
             return Err(InpaintError::NotInpainting {
                 path: root.join("unet/config.json").display().to_string(),
                 found: c.unet_config.in_channels,
+                out: c.unet_config.out_channels,
+                latent,
             });
         }
         Ok(Self {
@@ -143,7 +158,8 @@ pub struct InpaintRequest {
     pub guidance: f64,
     /// Seed of the initial noise.
     pub seed: u64,
-    /// Initial latents `[1, 4, h / f, w / f]` (overrides `seed`; for parity runs).
+    /// Initial latents `[1, c, h / f, w / f]`, `c` the VAE's latent channels (overrides
+    /// `seed`; for parity runs).
     pub init_latents: Option<Vec<f32>>,
     /// After each step, replace the known region of the latents by the image's latent
     /// noised to the next timestep (with the initial noise), as diffusers' inpainting
@@ -156,7 +172,7 @@ pub struct InpaintRequest {
 pub struct InpaintConditioning {
     /// `[1, 1, h / f, w / f]`, 1 where the image is repainted.
     pub mask_latent: Tensor<4>,
-    /// `vae.encode(image * (mask < 0.5)).mean * scaling_factor`, `[1, 4, h / f, w / f]`.
+    /// `vae.encode(image * (mask < 0.5)).mean * scaling_factor`, `[1, c, h / f, w / f]`.
     pub masked_image_latents: Tensor<4>,
 }
 
@@ -251,21 +267,22 @@ pub fn inpaint(
     let cond = prepare_conditioning(prior, req)?;
     let f = prior.vae_scale_factor;
     let (lh, lw) = (req.height / f, req.width / f);
+    let c = prior.vae.latent_channels;
     let device = &prior.device;
     let init = match &req.init_latents {
-        Some(v) if v.len() == 4 * lh * lw => v.clone(),
+        Some(v) if v.len() == c * lh * lw => v.clone(),
         Some(v) => {
             return Err(InpaintError::Size(format!(
-                "initial latents have {} values, expected 4x{lh}x{lw}",
+                "initial latents have {} values, expected {c}x{lh}x{lw}",
                 v.len()
             )))
         }
-        None => seeded_normal(4 * lh * lw, req.seed),
+        None => seeded_normal(c * lh * lw, req.seed),
     };
     let mut scheduler = DdimScheduler::new(prior.scheduler_config.clone());
     scheduler.set_timesteps(req.steps)?;
     // DDIM's init_noise_sigma is 1.
-    let mut latents = Tensor::<4>::from_data(TensorData::new(init, [1, 4, lh, lw]), device);
+    let mut latents = Tensor::<4>::from_data(TensorData::new(init, [1, c, lh, lw]), device);
 
     let cfg = req.guidance > 1.0;
     let (context, batch) = if cfg {

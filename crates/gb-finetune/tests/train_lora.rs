@@ -100,7 +100,7 @@ fn lora_steps_lower_the_loss_and_move_only_the_adapters() {
     };
     let mut t = FinetuneTrainer::new(models, cfg.clone(), &dev).unwrap();
     // a fixed evaluation batch
-    let eval = make_batch(&src, &cfg, 10_000, 0, 8, 1000).unwrap();
+    let eval = make_batch(&src, &cfg, 10_000, 0, 4, 8, 1000).unwrap();
     let loss0 = inpainting_loss(&t.models, &t.models.trainable, &eval, &dev, false)
         .unwrap()
         .into_scalar::<f64>();
@@ -348,4 +348,79 @@ fn bad_recipes_name_the_field() {
     .expect("resolution 36 accepted")
     .to_string();
     assert!(err.contains("resolution"), "{err}");
+}
+
+/// A copy of the tiny prior's recipe folder whose autoencoder has `latent` channels and whose
+/// U-Net takes `unet_in` and predicts `unet_out`.
+fn recipe_with_latent(latent: usize, unet_in: usize, unet_out: usize) -> tempfile::TempDir {
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../configs/tiny-prior");
+    let dir = tempfile::tempdir().unwrap();
+    for (sub, file) in [
+        ("vae", "config.json"),
+        ("unet", "config.json"),
+        ("text_encoder", "config.json"),
+        ("scheduler", "scheduler_config.json"),
+    ] {
+        std::fs::create_dir_all(dir.path().join(sub)).unwrap();
+        let text = std::fs::read_to_string(src.join(sub).join(file)).unwrap();
+        let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+        if sub == "vae" {
+            json["latent_channels"] = latent.into();
+        }
+        if sub == "unet" {
+            json["in_channels"] = unet_in.into();
+            json["out_channels"] = unet_out.into();
+        }
+        std::fs::write(dir.path().join(sub).join(file), json.to_string()).unwrap();
+    }
+    let tok = src.join("tokenizer");
+    std::fs::create_dir_all(dir.path().join("tokenizer")).unwrap();
+    for e in std::fs::read_dir(&tok).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dir.path().join("tokenizer").join(e.file_name())).unwrap();
+    }
+    dir
+}
+
+/// The latent channels follow the autoencoder's config: an 8-channel latent trains a U-Net
+/// with 17 inputs and 8 outputs from scratch (finite loss, parameters move), and a U-Net
+/// that does not fit the latent is refused, naming its config file and the channels it needs.
+#[test]
+fn an_eight_channel_latent_trains_and_a_mismatched_unet_is_refused() {
+    let _g = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let (dev, _) = device();
+    let vae_of = |dir: &std::path::Path| {
+        let cfg = gb_diffusion::config::AutoencoderKLConfig::from_file(
+            &dir.join("vae").join("config.json"),
+        )
+        .unwrap();
+        (gb_diffusion::models::AutoencoderKL::new(&cfg, &dev), cfg)
+    };
+    let good = recipe_with_latent(8, 17, 8);
+    let (vae, cfg) = vae_of(good.path());
+    let models = PriorModels::from_scratch(good.path(), vae, &cfg, &dev).unwrap();
+    assert_eq!(models.vae.latent_channels, 8);
+    let before = params(&models.trainable);
+    let train = FinetuneConfig {
+        target: TrainTarget::Full,
+        resolution: 16,
+        ..config(1)
+    };
+    let mut t = FinetuneTrainer::new(models, train, &dev).unwrap();
+    let stats = t.train_step(&data()).unwrap();
+    assert!(stats.loss.is_finite() && stats.loss > 0.0, "{stats:?}");
+    let after = params(&t.models.trainable);
+    let conv_in = "unet.conv_in.weight";
+    assert_eq!(after[conv_in].len(), before[conv_in].len());
+    assert_eq!(before[conv_in].len(), 32 * 17 * 3 * 3);
+    assert_ne!(after[conv_in], before[conv_in]);
+
+    let bad = recipe_with_latent(8, 9, 4);
+    let (vae, cfg) = vae_of(bad.path());
+    let err = PriorModels::from_scratch(bad.path(), vae, &cfg, &dev)
+        .err()
+        .expect("a 9-channel U-Net on an 8-channel latent is refused")
+        .to_string();
+    assert!(err.contains("unet/config.json"), "{err}");
+    assert!(err.contains("in_channels = 17"), "{err}");
 }

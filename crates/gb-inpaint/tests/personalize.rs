@@ -150,10 +150,14 @@ fn a_run_reuses_its_lora_until_what_it_was_trained_from_changes() {
     assert!(file.is_file() && out.join("personalize/personalize.json").is_file());
     let again = personalize(&inputs(&s, &prior, &lora, &settings, &out)).unwrap();
     assert!(again.cached);
-    assert_eq!(
-        (again.loss_before, again.loss_after, again.patches),
-        (first.loss_before, first.loss_after, first.patches)
+    // the cached losses come back from `personalize.json`: serde_json's default float parser
+    // may land one ulp away from the written value
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
+    assert!(
+        close(again.loss_before, first.loss_before) && close(again.loss_after, first.loss_after),
+        "{again:?} against {first:?}"
     );
+    assert_eq!(again.patches, first.patches);
     let reseeded = PersonalizeSettings {
         seed: 1,
         ..settings.clone()

@@ -21,7 +21,8 @@ use gb_finetune::diode::{DiodeDataset, DiodeSplit};
 use gb_finetune::run::{run_finetune, validation_settings, RunOptions};
 use gb_finetune::sample::PairSource;
 use gb_finetune::synthetic::SyntheticPairs;
-use gb_finetune::tiny_prior::run_recipe;
+use gb_finetune::tiny_prior::{run_recipe, SyntheticData};
+use gb_finetune::train::vae_stage::reconstruction_psnr;
 use gb_finetune::train::validate::validate;
 use gb_finetune::train::{FinetuneConfig, PriorModels};
 
@@ -259,6 +260,8 @@ fn validate_only(
     let mut settings = validation_settings(&cfg);
     settings.normals = true;
     let started = std::time::Instant::now();
+    let autoencoder_psnr = reconstruction_psnr(&prior.vae, val, settings.resolution, plain)?;
+    tracing::info!(autoencoder_psnr, "autoencoder reconstruction");
     let base_report = validate(&prior, val, &settings)?;
     tracing::info!(?base_report, "validation of the base");
     let lora_report = match &lora {
@@ -281,6 +284,7 @@ fn validate_only(
         "resolution": settings.resolution,
         "mode": cfg.mode,
         "seconds": started.elapsed().as_secs_f64(),
+        "autoencoder_psnr": autoencoder_psnr,
         "base": base_report,
         "with_lora": lora_report,
     });
@@ -293,11 +297,8 @@ fn validate_only(
     Ok(())
 }
 
-/// The procedural pairs `--synthetic` trains and validates on.
+/// The procedural pairs `--synthetic` trains and validates on: the built-in prior's
+/// ([`SyntheticData::builtin`]).
 pub fn default_synthetic() -> anyhow::Result<(SyntheticPairs, SyntheticPairs)> {
-    let scenes = ["stairs", "fence"];
-    Ok((
-        SyntheticPairs::generate(&scenes, &[1, 2, 3, 4, 5, 6], 96, 72)?,
-        SyntheticPairs::generate(&scenes, &[101, 102], 96, 72)?,
-    ))
+    Ok(SyntheticData::builtin().generate()?)
 }

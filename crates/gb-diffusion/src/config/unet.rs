@@ -185,6 +185,13 @@ impl UNet2DConditionConfig {
             .get(i)
     }
 
+    /// Whether this is an inpainting U-Net for latents of `latent_channels`: its input is the
+    /// noisy latent, the mask and the masked-image latent (`2 * latent_channels + 1`, 9 for
+    /// Stable Diffusion's 4) and it predicts `latent_channels`.
+    pub fn is_inpainting_for(&self, latent_channels: usize) -> bool {
+        self.in_channels == 2 * latent_channels + 1 && self.out_channels == latent_channels
+    }
+
     /// Width of the time embedding (`4 * block_out_channels[0]`).
     pub fn time_embed_dim(&self) -> usize {
         self.block_out_channels[0] * 4

@@ -59,13 +59,14 @@ pub fn normals(rng: &mut impl Rng, n: usize) -> Vec<f32> {
 
 /// Builds micro-batch `micro` of step `step` from `source`.
 ///
-/// `latent_size` is the side of the latent (`resolution / vae_factor`) and `timesteps` the
-/// length of the training schedule.
+/// `latent_channels` and `latent_size` are the VAE's latent channels and the side of the
+/// latent (`resolution / vae_factor`), and `timesteps` the length of the training schedule.
 pub fn make_batch(
     source: &dyn PairSource,
     cfg: &FinetuneConfig,
     step: usize,
     micro: usize,
+    latent_channels: usize,
     latent_size: usize,
     timesteps: usize,
 ) -> Result<HostBatch, FinetuneError> {
@@ -126,6 +127,9 @@ pub fn make_batch(
         batch.modalities.push(modality);
         batch.timesteps.push(rng.random_range(0..timesteps));
     }
-    batch.noise = normals(&mut rng, cfg.batch * 4 * latent_size * latent_size);
+    batch.noise = normals(
+        &mut rng,
+        cfg.batch * latent_channels * latent_size * latent_size,
+    );
     Ok(batch)
 }

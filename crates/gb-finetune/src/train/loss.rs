@@ -13,9 +13,9 @@ use crate::FinetuneError;
 
 /// Conditioning built from a batch with the frozen VAE (no graph).
 pub struct LatentBatch {
-    /// Clean latents times `scaling_factor`, `[b, 4, h, w]`.
+    /// Clean latents times `scaling_factor`, `[b, c, h, w]` (`c` the VAE's latent channels).
     pub latents: Tensor<4>,
-    /// Masked-image latents times `scaling_factor`, `[b, 4, h, w]`.
+    /// Masked-image latents times `scaling_factor`, `[b, c, h, w]`.
     pub masked_latents: Tensor<4>,
     /// The hole at latent resolution (nearest, as diffusers' `interpolate`), `[b, 1, h, w]`.
     pub mask: Tensor<4>,
@@ -87,7 +87,8 @@ pub fn inpainting_loss(
     let (b, r, f) = (batch.size, batch.resolution, models.vae_factor);
     let l = r / f;
     let cond = encode_batch(models, batch, device);
-    let noise = Tensor::<4>::from_data(TensorData::new(batch.noise.clone(), [b, 4, l, l]), device);
+    let c = models.vae.latent_channels;
+    let noise = Tensor::<4>::from_data(TensorData::new(batch.noise.clone(), [b, c, l, l]), device);
     let ab: Vec<f32> = batch
         .timesteps
         .iter()

@@ -82,6 +82,30 @@ fn diffusion(context: &str, path: &Path) -> impl Fn(String) -> FinetuneError {
     }
 }
 
+/// Refuses a U-Net (config file `path`) that is not an inpainting U-Net for latents of
+/// `latent_channels`: input `2 * latent_channels + 1` (noisy latent, mask, masked-image
+/// latent; 9 for Stable Diffusion) and output `latent_channels`.
+fn check_inpainting(
+    unet: &UNet2DConditionConfig,
+    latent_channels: usize,
+    path: &Path,
+) -> Result<(), FinetuneError> {
+    if unet.is_inpainting_for(latent_channels) {
+        return Ok(());
+    }
+    Err(FinetuneError::Invalid {
+        path: path.to_path_buf(),
+        message: format!(
+            "in_channels = {} and out_channels = {}; fine-tuning needs an inpainting U-Net \
+             for the VAE's {latent_channels} latent channels: in_channels = {} (noisy latent, \
+             mask, masked-image latent) and out_channels = {latent_channels}",
+            unet.in_channels,
+            unet.out_channels,
+            2 * latent_channels + 1
+        ),
+    })
+}
+
 /// `alphas_cumprod` of a scheduler config.
 pub fn alphas_cumprod(cfg: &SchedulerConfig) -> Vec<f64> {
     let mut acc = 1.0;
@@ -126,16 +150,11 @@ impl PriorModels {
                 .map_err(|e| diffusion("merging the LoRA", &file.path)(e.to_string()))?
                 .0;
         }
-        if c.unet_config.in_channels != 9 {
-            return Err(FinetuneError::Invalid {
-                path: root.join("unet").join("config.json"),
-                message: format!(
-                    "in_channels = {}; fine-tuning needs an inpainting U-Net with 9 \
-                     (noisy latent 4 + mask 1 + masked-image latent 4)",
-                    c.unet_config.in_channels
-                ),
-            });
-        }
+        check_inpainting(
+            &c.unet_config,
+            c.vae_config.latent_channels,
+            &root.join("unet").join("config.json"),
+        )?;
         let (tokenizer, unet, text_encoder, unet_config) =
             (c.tokenizer, c.unet, c.text_encoder, c.unet_config);
         let (vae, vae_config, scheduler) = (c.vae, c.vae_config, c.scheduler);
@@ -164,6 +183,7 @@ impl PriorModels {
         let unet_path = recipe.join("unet").join("config.json");
         let unet_config = UNet2DConditionConfig::from_file(&unet_path)
             .map_err(|e| diffusion("unet config", &unet_path)(e.to_string()))?;
+        check_inpainting(&unet_config, vae_config.latent_channels, &unet_path)?;
         let text_path = recipe.join("text_encoder").join("config.json");
         let text =
             std::fs::read_to_string(&text_path).map_err(|e| FinetuneError::io(&text_path, e))?;

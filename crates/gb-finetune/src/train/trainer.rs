@@ -141,12 +141,13 @@ impl FinetuneTrainer {
     pub fn train_step(&mut self, source: &dyn PairSource) -> Result<StepStats, FinetuneError> {
         let cfg = &self.config;
         let latent = cfg.resolution / self.models.vae_factor;
+        let channels = self.models.vae.latent_channels;
         let schedule = self.models.alphas_cumprod.len();
         let train_text = cfg.train_text_encoder;
         let mut accum = GradientsAccumulator::<Trainable>::new();
         let mut loss_sum = 0.0;
         for micro in 0..cfg.grad_accum {
-            let batch = make_batch(source, cfg, self.step, micro, latent, schedule)?;
+            let batch = make_batch(source, cfg, self.step, micro, channels, latent, schedule)?;
             let loss = inpainting_loss(
                 &self.models,
                 &self.models.trainable,

@@ -167,10 +167,11 @@ pub fn held_out_loss(
 ) -> Result<f64, FinetuneError> {
     let cfg = &trainer.config;
     let latent = cfg.resolution / trainer.models.vae_factor;
+    let channels = trainer.models.vae.latent_channels;
     let schedule = trainer.models.alphas_cumprod.len();
     let mut sum = 0.0;
     for micro in 0..EVAL_BATCHES {
-        let batch = make_batch(source, cfg, EVAL_STEP, micro, latent, schedule)?;
+        let batch = make_batch(source, cfg, EVAL_STEP, micro, channels, latent, schedule)?;
         let loss = inpainting_loss(
             &trainer.models,
             &trainer.models.trainable,
