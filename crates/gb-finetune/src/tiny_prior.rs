@@ -72,11 +72,17 @@ impl SyntheticData {
 
     /// Renders the training and the held-out pairs.
     pub fn generate(&self) -> Result<(SyntheticPairs, SyntheticPairs), FinetuneError> {
+        Ok((self.pairs(&self.train_seeds)?, self.held_out()?))
+    }
+
+    /// Renders the held-out pairs only.
+    pub fn held_out(&self) -> Result<SyntheticPairs, FinetuneError> {
+        self.pairs(&self.val_seeds)
+    }
+
+    fn pairs(&self, seeds: &[u64]) -> Result<SyntheticPairs, FinetuneError> {
         let scenes: Vec<&str> = self.scenes.iter().map(String::as_str).collect();
-        Ok((
-            SyntheticPairs::generate(&scenes, &self.train_seeds, self.width, self.height)?,
-            SyntheticPairs::generate(&scenes, &self.val_seeds, self.width, self.height)?,
-        ))
+        SyntheticPairs::generate(&scenes, seeds, self.width, self.height)
     }
 }
 

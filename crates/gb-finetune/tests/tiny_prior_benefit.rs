@@ -38,14 +38,7 @@ fn settings() -> ValidationSettings {
 
 /// The recipe's held-out pairs.
 fn held_out() -> SyntheticPairs {
-    let data = SyntheticData::builtin();
-    SyntheticPairs::generate(
-        &data.scenes.iter().map(String::as_str).collect::<Vec<_>>(),
-        &data.val_seeds,
-        data.width,
-        data.height,
-    )
-    .expect("held-out pairs")
+    SyntheticData::builtin().held_out().expect("held-out pairs")
 }
 
 fn report(lora: bool) -> ValidationReport {

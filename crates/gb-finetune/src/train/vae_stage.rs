@@ -13,6 +13,7 @@ use gb_diffusion::config::AutoencoderKLConfig;
 use gb_diffusion::models::AutoencoderKL;
 
 use super::batch::{normals, stream};
+use super::validate::masked_psnr;
 use crate::crop::random_square_crop;
 use crate::sample::PairSource;
 use crate::FinetuneError;
@@ -189,6 +190,11 @@ pub fn reconstruction_psnr(
 ) -> Result<f64, FinetuneError> {
     let (batch, batches) = RECONSTRUCTION_CROPS;
     let r = resolution;
+    let n = 3 * r * r;
+    // images in [0, 1], every pixel scored (an exact reconstruction counts as 100 dB)
+    let unit =
+        |v: &[f32]| -> Vec<f32> { v.iter().map(|p| (p.clamp(-1.0, 1.0) + 1.0) / 2.0).collect() };
+    let whole = vec![1.0f32; r * r];
     let mut sum = 0.0;
     for k in 0..batches {
         let x = image_batch(source, r, batch, RECONSTRUCTION_SEED, k)?;
@@ -200,18 +206,11 @@ pub fn reconstruction_psnr(
             .map_err(|e| {
                 FinetuneError::diffusion("autoencoder reconstruction", format!("{e:?}"))
             })?;
-        let n = 3 * r * r;
         for i in 0..batch {
-            let mse = x[i * n..(i + 1) * n]
-                .iter()
-                .zip(&y[i * n..(i + 1) * n])
-                .map(|(a, b)| {
-                    let d = (a.clamp(-1.0, 1.0) - b.clamp(-1.0, 1.0)) as f64 / 2.0;
-                    d * d
-                })
-                .sum::<f64>()
-                / n as f64;
-            sum += 10.0 * (1.0 / mse.max(1e-10)).log10();
+            let (a, b) = (unit(&x[i * n..(i + 1) * n]), unit(&y[i * n..(i + 1) * n]));
+            sum += masked_psnr(&a, &b, &whole)
+                .unwrap_or(f64::INFINITY)
+                .min(100.0);
         }
     }
     Ok(sum / (batch * batches) as f64)
