@@ -6,9 +6,10 @@
 //! One file per benchmark, with the helpers they share in [`report`] (the machine's
 //! description, peak memory, the report writer, the date) and [`python`] (the reference
 //! interpreter); [`GridArgs`] are the method-grid flags that `ablate` and `bench quality`
-//! share. Adding a benchmark: write `<what>.rs` with `pub struct Args` (clap::Args) and
-//! `pub fn run(args: Args) -> anyhow::Result<()>`, declare it below, then add one variant to
-//! `What` and one arm to [`run`].
+//! share, and [`trade`] runs that grid once per preset. Adding a benchmark: write
+//! `<what>.rs` with `pub struct Args` (clap::Args) and `pub fn run(args: Args) ->
+//! anyhow::Result<()>`, declare it below, then add one variant to `What` and one arm to
+//! [`run`].
 
 pub mod distill;
 pub mod eval;
@@ -19,6 +20,7 @@ pub mod pipeline;
 pub mod python;
 pub mod quality;
 pub mod report;
+pub mod trade;
 pub mod unet;
 
 pub use grid_args::GridArgs;
@@ -46,6 +48,8 @@ enum What {
     Quality(quality::Args),
     /// One GB-NeRF training step per phase at a preset, with an SD-1.5-sized prior.
     Pipeline(pipeline::Args),
+    /// The speed/accuracy trade: mask-box metrics against wall time per preset and method.
+    Trade(trade::Args),
     /// Every GPU figure in one file (U-Net, VAE, a full step, NeRF vs flex); `--smoke` at
     /// tiny sizes on any device.
     Gpu(gpu::Args),
@@ -60,6 +64,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         What::Distill(a) => distill::run(a),
         What::Quality(a) => quality::run(a),
         What::Pipeline(a) => pipeline::run(a),
+        What::Trade(a) => trade::run(a),
         What::Gpu(a) => gpu::run(a),
     }
 }

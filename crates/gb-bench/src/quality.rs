@@ -17,7 +17,7 @@
 //! each cell with its sample standard deviation and per-seed values, `vs_none` compares the
 //! means, and `wins_vs_none` counts the seeds on which each method beats that seed's `none`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use gb_inpaint::grid::{self, Grid};
@@ -166,118 +166,138 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let stamp = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)?
         .as_secs();
-    let depth = match args.grid.depth {
-        Some(d) => d,
-        None => {
-            gb_nerf::train::NerfConfig::preset(&args.grid.preset)?
-                .train
-                .depth
-        }
-    };
     for &name in &args.scenes {
-        let seeds: Vec<Option<u64>> = match &args.seeds {
-            Some(list) if !list.is_empty() => list.iter().copied().map(Some).collect(),
-            _ => vec![None],
-        };
-        let started = std::time::Instant::now();
-        let mut per_seed = Vec::new();
-        let mut errors = Vec::new();
-        let mut opts = ProceduralOptions {
+        let report = run_scene(
             name,
-            ..Default::default()
-        };
-        for seed in &seeds {
-            opts.seed = seed.unwrap_or(0);
-            let (scene_dir, runs) = match seed {
-                Some(s) => (
-                    args.work.join(format!("{name}-scene-seed-{s}")),
-                    args.work.join(name.to_string()).join(format!("seed-{s}")),
-                ),
-                None => (
-                    args.work.join(format!("{name}-scene")),
-                    args.work.join(name.to_string()),
-                ),
-            };
-            procedural::write(&opts, &scene_dir)
-                .with_context(|| format!("generating {name} into {}", scene_dir.display()))?;
-            // the method grid without the w3 sweep, run in this process
-            let outcome = Grid::plan(
-                args.grid.settings(scene_dir.clone(), *seed),
-                args.grid.methods.as_deref(),
-                Some(&[]),
-                &runs,
-            )
-            .and_then(|g| g.write(&runs).map(|_| g))
-            .and_then(|g| {
-                for (i, cell) in g.cells.iter().enumerate() {
-                    let dir = runs.join(&cell.dir);
-                    if args.reuse_finished && grid::cell_finished(&dir) {
-                        tracing::info!(cell = %dir.display(), "reusing the finished run");
-                    } else {
-                        grid::run_cell(&runs, i)?;
-                    }
-                }
-                grid::merge(&runs)
-            })
-            .map_err(anyhow::Error::from)
-            .and_then(|merged| {
-                let failed: Vec<String> = merged
-                    .failed
-                    .iter()
-                    .map(|(d, e)| format!("{d}: {e}"))
-                    .collect();
-                if failed.is_empty() {
-                    Ok(())
-                } else {
-                    Err(anyhow::anyhow!("run(s) failed: {}", failed.join("; ")))
-                }
-            });
-            if let Err(e) = &outcome {
-                errors.push(format!("seed {seed:?}: {e:#}"));
-            }
-            let read = |file: &str| -> anyhow::Result<Value> {
-                let p = runs.join(file);
-                let text = std::fs::read_to_string(&p)
-                    .with_context(|| format!("reading {}", p.display()))?;
-                serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))
-            };
-            per_seed.push(json!({
-                "seed": seed,
-                "runs": runs.display().to_string(),
-                "baselines": read("baselines.json")?,
-                "ablation": read("ablation.json")?,
-            }));
-        }
-        let tables =
-            |key: &str| -> Vec<Value> { per_seed.iter().map(|s| s[key].clone()).collect() };
-        let baselines = mean_table(&tables("baselines"));
-        let ablation = mean_table(&tables("ablation"));
-        let report = json!({
-            "benchmark": "quality",
-            "machine": super::machine_description(),
-            "scene": format!("{name} (procedural, {}x{})", opts.width, opts.height),
-            "scene_seeds": seeds.iter().map(|s| s.unwrap_or(0)).collect::<Vec<_>>(),
-            "depth": depth.name(),
-            "preset": args.grid.preset,
-            "prior": args.grid.prior.clone().unwrap_or_else(|| "tiny".into()),
-            "device": args.grid.device.unwrap_or_default().name(),
-            "training_seeds": seeds,
-            "wall_seconds": started.elapsed().as_secs_f64(),
-            "baselines": baselines,
-            "ablation": ablation,
-            "baselines_vs_none": vs_none(&baselines),
-            "ablation_vs_none": vs_none(&ablation),
-            "baselines_wins_vs_none": wins_vs_none(&tables("baselines")),
-            "ablation_wins_vs_none": wins_vs_none(&tables("ablation")),
-            "per_seed": per_seed,
-            "error": if errors.is_empty() { Value::Null } else { json!(errors.join("; ")) },
-        });
+            &args.grid,
+            args.seeds.as_deref(),
+            &args.work,
+            args.reuse_finished,
+        )?;
         let path = args.out.join(format!("quality-{name}-{stamp}.json"));
         gb_core::write_atomic(&path, &serde_json::to_vec_pretty(&report)?)
             .with_context(|| format!("writing {}", path.display()))?;
         println!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// The quality report of one scene: the method grid of `grid` on each of `seeds` (none: scene
+/// seed 0 and the preset's training seed), run into `work` (reusing finished runs when
+/// `reuse_finished`), as the mean tables over seeds with their comparison against `none`.
+/// A run that fails is recorded in the report's `error`; a scene that cannot be generated or
+/// a grid whose tables cannot be read is an error.
+pub fn run_scene(
+    name: SceneName,
+    grid: &crate::GridArgs,
+    seeds: Option<&[u64]>,
+    work: &Path,
+    reuse_finished: bool,
+) -> anyhow::Result<Value> {
+    let depth = match grid.depth {
+        Some(d) => d,
+        None => {
+            gb_nerf::train::NerfConfig::preset(&grid.preset)?
+                .train
+                .depth
+        }
+    };
+    let seeds: Vec<Option<u64>> = match seeds {
+        Some(list) if !list.is_empty() => list.iter().copied().map(Some).collect(),
+        _ => vec![None],
+    };
+    let started = std::time::Instant::now();
+    let mut per_seed = Vec::new();
+    let mut errors = Vec::new();
+    let mut opts = ProceduralOptions {
+        name,
+        ..Default::default()
+    };
+    for seed in &seeds {
+        opts.seed = seed.unwrap_or(0);
+        let (scene_dir, runs) = match seed {
+            Some(s) => (
+                work.join(format!("{name}-scene-seed-{s}")),
+                work.join(name.to_string()).join(format!("seed-{s}")),
+            ),
+            None => (
+                work.join(format!("{name}-scene")),
+                work.join(name.to_string()),
+            ),
+        };
+        procedural::write(&opts, &scene_dir)
+            .with_context(|| format!("generating {name} into {}", scene_dir.display()))?;
+        // the method grid without the w3 sweep, run in this process
+        let outcome = Grid::plan(
+            grid.settings(scene_dir.clone(), *seed),
+            grid.methods.as_deref(),
+            Some(&[]),
+            &runs,
+        )
+        .and_then(|g| g.write(&runs).map(|_| g))
+        .and_then(|g| {
+            for (i, cell) in g.cells.iter().enumerate() {
+                let dir = runs.join(&cell.dir);
+                if reuse_finished && grid::cell_finished(&dir) {
+                    tracing::info!(cell = %dir.display(), "reusing the finished run");
+                } else {
+                    grid::run_cell(&runs, i)?;
+                }
+            }
+            grid::merge(&runs)
+        })
+        .map_err(anyhow::Error::from)
+        .and_then(|merged| {
+            let failed: Vec<String> = merged
+                .failed
+                .iter()
+                .map(|(d, e)| format!("{d}: {e}"))
+                .collect();
+            if failed.is_empty() {
+                Ok(())
+            } else {
+                Err(anyhow::anyhow!("run(s) failed: {}", failed.join("; ")))
+            }
+        });
+        if let Err(e) = &outcome {
+            errors.push(format!("seed {seed:?}: {e:#}"));
+        }
+        let read = |file: &str| -> anyhow::Result<Value> {
+            let p = runs.join(file);
+            let text =
+                std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))
+        };
+        per_seed.push(json!({
+            "seed": seed,
+            "runs": runs.display().to_string(),
+            "baselines": read("baselines.json")?,
+            "ablation": read("ablation.json")?,
+        }));
+    }
+    let tables = |key: &str| -> Vec<Value> { per_seed.iter().map(|s| s[key].clone()).collect() };
+    let baselines = mean_table(&tables("baselines"));
+    let ablation = mean_table(&tables("ablation"));
+    Ok(json!({
+        "benchmark": "quality",
+        "machine": super::machine_description(),
+        "scene": format!("{name} (procedural, {}x{})", opts.width, opts.height),
+        "scene_seeds": seeds.iter().map(|s| s.unwrap_or(0)).collect::<Vec<_>>(),
+        "depth": depth.name(),
+        "preset": grid.preset,
+        "prior": grid.prior.clone().unwrap_or_else(|| "tiny".into()),
+        "device": grid.device.unwrap_or_default().name(),
+        "training_seeds": seeds,
+        "wall_seconds": started.elapsed().as_secs_f64(),
+        "baselines": baselines,
+        "ablation": ablation,
+        "baselines_vs_none": vs_none(&baselines),
+        "ablation_vs_none": vs_none(&ablation),
+        "baselines_wins_vs_none": wins_vs_none(&tables("baselines")),
+        "ablation_wins_vs_none": wins_vs_none(&tables("ablation")),
+        "per_seed": per_seed,
+        "error": if errors.is_empty() { Value::Null } else { json!(errors.join("; ")) },
+    }))
 }
 
 #[cfg(test)]

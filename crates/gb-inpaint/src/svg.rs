@@ -281,6 +281,32 @@ fn widen(a: f64, b: f64) -> (f64, f64) {
     }
 }
 
+/// One SVG document of `charts` laid out row by row, `columns` to a row (at least one), each
+/// in a cell the size of the largest chart: a figure of several panels in one file.
+pub fn tile(charts: &[LineChart], columns: usize) -> String {
+    let columns = columns.max(1);
+    let cell_w = charts.iter().map(|c| c.width).max().unwrap_or(0);
+    let cell_h = charts.iter().map(|c| c.height).max().unwrap_or(0);
+    let rows = charts.len().div_ceil(columns);
+    let (w, h) = (
+        cell_w * columns.min(charts.len()) as u32,
+        cell_h * rows as u32,
+    );
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}">"#
+    );
+    for (i, chart) in charts.iter().enumerate() {
+        let (x, y) = ((i % columns) as u32 * cell_w, (i / columns) as u32 * cell_h);
+        let _ = writeln!(out, r#"<g transform="translate({x},{y})">"#);
+        out.push_str(&chart.to_svg());
+        out.push_str("</g>\n");
+    }
+    out.push_str("</svg>\n");
+    out
+}
+
 /// The "nice" step (1, 2 or 5 times a power of ten) nearest above `raw`.
 pub fn nice_step(raw: f64) -> f64 {
     if raw <= 0.0 || !raw.is_finite() {
@@ -377,6 +403,29 @@ mod tests {
         assert!(svg.contains(">bad<"), "legend lists every series");
         // first point at the left-bottom... x=0 -> left margin, y=1 -> top (1e0 is the max)
         assert!(svg.contains("points=\"64.0,32.0 "), "{svg}");
+    }
+
+    #[test]
+    fn tile_places_each_chart_in_its_cell() {
+        let chart = |t: &str| {
+            let mut c = LineChart::new(t, "x", "y");
+            c.push(Series::new("s", vec![(0.0, 1.0), (1.0, 2.0)]).with_markers());
+            c
+        };
+        let charts = [chart("a"), chart("b"), chart("c")];
+        let svg = tile(&charts, 2);
+        // two columns of 560 x 300 cells, two rows
+        assert!(
+            svg.starts_with(r#"<svg xmlns="http://www.w3.org/2000/svg" width="1120" height="600""#),
+            "{svg}"
+        );
+        for offset in ["translate(0,0)", "translate(560,0)", "translate(0,300)"] {
+            assert_eq!(svg.matches(offset).count(), 1, "{offset} in {svg}");
+        }
+        assert_eq!(svg.matches("<svg ").count(), 4);
+        assert_eq!(svg.matches("</svg>").count(), 4);
+        assert!(svg.contains(">a<") && svg.contains(">c<"));
+        assert!(tile(&[], 3).contains(r#"width="0" height="0""#));
     }
 
     #[test]

@@ -150,11 +150,11 @@ fn a_run_reuses_its_lora_until_what_it_was_trained_from_changes() {
     assert!(file.is_file() && out.join("personalize/personalize.json").is_file());
     let again = personalize(&inputs(&s, &prior, &lora, &settings, &out)).unwrap();
     assert!(again.cached);
-    // the cached losses come back from `personalize.json`: serde_json's default float parser
-    // may land one ulp away from the written value
-    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
-    assert!(
-        close(again.loss_before, first.loss_before) && close(again.loss_after, first.loss_after),
+    // the cached losses come back from `personalize.json` bit for bit (serde_json's
+    // float_roundtrip parser)
+    assert_eq!(
+        (again.loss_before, again.loss_after),
+        (first.loss_before, first.loss_after),
         "{again:?} against {first:?}"
     );
     assert_eq!(again.patches, first.patches);
@@ -227,5 +227,22 @@ fn a_large_object_gets_smaller_patches_rather_than_none() {
         for y in r.y0..r.y0 + side {
             assert!((r.x0..r.x0 + side).all(|x| !m.data[y * m.width + x]));
         }
+    }
+}
+
+/// The workspace's serde_json parses every float it wrote back to the same bits
+/// (`float_roundtrip`); without it this value, a personalisation loss once cached on one CPU,
+/// came back one ulp low and a cache hit reported another loss.
+#[test]
+fn json_floats_read_back_bit_for_bit() {
+    for x in [
+        0.025560281006619338_f64,
+        1.0 / 3.0,
+        2.2250738585072014e-308,
+        1e23,
+    ] {
+        let text = serde_json::to_string(&x).unwrap();
+        let back: f64 = serde_json::from_str(&text).unwrap();
+        assert_eq!(back.to_bits(), x.to_bits(), "{x:e} written as {text}");
     }
 }
