@@ -76,11 +76,14 @@ fn trade_points(reports: &[(String, Value)]) -> Vec<Value> {
         let mut seen = Vec::new();
         for table in ["baselines", "ablation"] {
             for row in report[table]["rows"].as_array().into_iter().flatten() {
-                let method = row["method"].as_str().unwrap_or_default().to_string();
+                // a row without a method is no method's point
+                let Some(method) = row["method"].as_str() else {
+                    continue;
+                };
                 if seen.contains(&method) {
                     continue;
                 }
-                seen.push(method.clone());
+                seen.push(method);
                 let mut p = json!({
                     "preset": preset,
                     "method": method,
@@ -101,23 +104,21 @@ fn trade_points(reports: &[(String, Value)]) -> Vec<Value> {
     points
 }
 
+/// The distinct string values of `key` over `points`, in order of first appearance.
+fn distinct<'a>(points: &'a [Value], key: &str) -> Vec<&'a str> {
+    let mut out: Vec<&str> = Vec::new();
+    for v in points.iter().filter_map(|p| p[key].as_str()) {
+        if !out.contains(&v) {
+            out.push(v);
+        }
+    }
+    out
+}
+
 /// One chart per metric of [`METRICS`]: for each method, its points in preset order, the
 /// metric against the wall time of a run in minutes; the x label names the presets in order.
 fn trade_charts(points: &[Value], scene: &str) -> Vec<LineChart> {
-    let mut methods: Vec<&str> = Vec::new();
-    for p in points {
-        let m = p["method"].as_str().unwrap_or_default();
-        if !methods.contains(&m) {
-            methods.push(m);
-        }
-    }
-    let mut presets: Vec<&str> = Vec::new();
-    for p in points {
-        let name = p["preset"].as_str().unwrap_or_default();
-        if !presets.contains(&name) {
-            presets.push(name);
-        }
-    }
+    let (methods, presets) = (distinct(points, "method"), distinct(points, "preset"));
     let x_label = format!("wall time per run, min (presets: {})", presets.join(" → "));
     METRICS
         .iter()
@@ -166,8 +167,8 @@ fn markdown(points: &[Value]) -> String {
         let minutes = |k: &str| json!(p[k].as_f64().map(|s| s / 60.0));
         out.push_str(&format!(
             "| {} | {} | {} |",
-            p["preset"].as_str().unwrap_or_default(),
-            p["method"].as_str().unwrap_or_default(),
+            p["preset"].as_str().unwrap_or("n/a"),
+            p["method"].as_str().unwrap_or("n/a"),
             cell(&minutes("seconds"), &minutes("seconds_std"), 1, spread)
         ));
         for (key, _, _) in METRICS {
@@ -336,7 +337,7 @@ mod tests {
     #[test]
     fn a_preset_file_is_named_by_its_stem() {
         assert_eq!(preset_label("balanced"), "balanced");
-        assert_eq!(preset_label("/tmp/x/my-fast.toml"), "my-fast");
+        assert_eq!(preset_label("my-presets/my-fast.toml"), "my-fast");
         assert_eq!(preset_label("configs/presets/paper.toml"), "paper");
     }
 
