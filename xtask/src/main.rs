@@ -37,6 +37,9 @@ enum Command {
     Ablate(cmd::ablate::Args),
     /// 2D inpainting with a Stable Diffusion inpainting prior (checks that a prior loads).
     InpaintImage(cmd::inpaint_image::Args),
+    /// A reference view from the prior: one training view with its mask filled, for
+    /// `inpaint --reference VIEW=IMAGE`.
+    Fill(cmd::fill::Args),
     /// The 2D score-distillation playground: SDS, CSD or BSD on the pixels inside a mask.
     DistillImage(cmd::distill_image::Args),
     /// Run one network component on fixed inputs and write its outputs (parity checks).
@@ -128,6 +131,7 @@ fn main() {
         Command::Ablate(a) => cmd::ablate::run(a),
         Command::InpaintImage(a) => cmd::inpaint_image::run(a),
         Command::DistillImage(a) => cmd::distill_image::run(a),
+        Command::Fill(a) => cmd::fill::run(a),
         Command::Parity(a) => cmd::parity::run(a),
         Command::Bench(a) => gb_bench::run(a),
         Command::Fuzz(a) => cmd::fuzz::run(a),

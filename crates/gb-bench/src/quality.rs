@@ -16,6 +16,14 @@
 //! 0.517 for training seeds 0 and 1), so the recorded tables are then the mean over seeds,
 //! each cell with its sample standard deviation and per-seed values, `vs_none` compares the
 //! means, and `wins_vs_none` counts the seeds on which each method beats that seed's `none`.
+//!
+//! `--oracle` adds the row `reference-oracle`, an upper bound that no real capture has: the
+//! `none` method with one reference view ([`gb_inpaint::reference`]) taken from the scene's
+//! `clean/` (the middle masked training view rendered without the object, exact ground
+//! truth). It answers whether the pipeline carries a perfect 2D fill of one view into 3D.
+//! `--fill-reference` adds `reference-fill`: the same view filled in 2D by the grid's prior
+//! (`cargo xtask fill`, its default settings, the prior's own LoRA) as the reference, which
+//! is what a user without a clean plate or a 2D tool runs.
 
 use std::path::{Path, PathBuf};
 
@@ -49,6 +57,119 @@ pub struct Args {
     /// Output folder of the JSON.
     #[arg(long, default_value = "bench/results")]
     pub out: PathBuf,
+    /// Add the oracle row `reference-oracle` (module docs): labelled as an oracle, never a
+    /// method a user can run on a real capture without a clean plate.
+    #[arg(long)]
+    pub oracle: bool,
+    /// Add the row `reference-fill` (module docs): the `none` method with a reference that
+    /// the grid's prior fills in 2D (`cargo xtask fill`).
+    #[arg(long)]
+    pub fill_reference: bool,
+}
+
+/// The extra rows of `bench quality` beside the method grid.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ExtraRows {
+    /// `reference-oracle` (`--oracle`).
+    pub oracle: bool,
+    /// `reference-fill` (`--fill-reference`).
+    pub fill: bool,
+}
+
+/// The name of the oracle row of `--oracle`.
+pub const REFERENCE_ORACLE: &str = "reference-oracle";
+
+/// The name of the row of `--fill-reference`.
+pub const REFERENCE_FILL: &str = "reference-fill";
+
+/// The middle masked training view of a generated scene: the reference view of the
+/// `reference-*` rows.
+pub fn reference_view(scene: &procedural::GeneratedScene) -> Option<&procedural::GeneratedView> {
+    let train: Vec<&procedural::GeneratedView> = scene
+        .views
+        .iter()
+        .filter(|v| v.split == gb_nerf::scene::Split::Train && v.mask.data.iter().any(|b| *b))
+        .collect();
+    train.get(train.len() / 2).copied()
+}
+
+/// Writes `dir/NAME.toml`: the `none` method with the reference `VIEW.png=IMAGE`, headed by
+/// `comment` lines. Returns its path.
+fn write_reference_method(
+    dir: &Path,
+    name: &str,
+    comment: &str,
+    view: &str,
+    image: &Path,
+) -> anyhow::Result<PathBuf> {
+    let image = std::path::absolute(image)?;
+    // a JSON string is a valid TOML basic string
+    let pair = serde_json::to_string(&format!("{view}.png={}", image.display()))?;
+    let description = serde_json::to_string(comment)?;
+    let text = format!(
+        "# {comment}\nname = \"{name}\"\ndescription = {description}\nmax_consecutive_nan = 10\n\n\
+         [rgb]\nmethod = \"none\"\n\n[normal]\nmethod = \"none\"\n\n[reference]\nimages = [{pair}]\n"
+    );
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let path = dir.join(format!("{name}.toml"));
+    gb_core::write_atomic(&path, text.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
+}
+
+/// Writes `dir/reference-oracle.toml` (module docs): the `none` method with the middle
+/// masked training view of `scene` as its reference, from the scene's `clean/`.
+pub fn write_reference_oracle(
+    scene: &procedural::GeneratedScene,
+    scene_dir: &Path,
+    dir: &Path,
+) -> anyhow::Result<PathBuf> {
+    let view = reference_view(scene)
+        .ok_or_else(|| anyhow::anyhow!("{}: no masked training view", scene_dir.display()))?;
+    write_reference_method(
+        dir,
+        REFERENCE_ORACLE,
+        "ORACLE, not a method: no prior; one training view without the object (exact ground \
+         truth from the scene's clean/) is the reference",
+        &view.name,
+        &scene_dir.join("clean").join(format!("{}.png", view.name)),
+    )
+}
+
+/// Writes `dir/reference-fill.toml` (module docs): the `none` method with the middle masked
+/// training view of `scene` filled by `prior` (`gb_inpaint::fill`, its default settings) as
+/// its reference, the fill saved beside it.
+pub fn write_reference_fill(
+    scene: &procedural::GeneratedScene,
+    scene_dir: &Path,
+    dir: &Path,
+    prior: &str,
+    device: gb_core::BackendKind,
+) -> anyhow::Result<PathBuf> {
+    let view = reference_view(scene)
+        .ok_or_else(|| anyhow::anyhow!("{}: no masked training view", scene_dir.display()))?;
+    let png = dir.join(format!("{REFERENCE_FILL}-{}.png", view.name));
+    if !png.is_file() {
+        let opts = gb_inpaint::fill::FillOptions {
+            prior: prior.to_string(),
+            device,
+            ..Default::default()
+        };
+        let filled = gb_inpaint::fill::fill(scene_dir, &view.name, &opts)?;
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        gb_core::write_rgb_png(&png, &filled.image)
+            .with_context(|| format!("writing {}", png.display()))?;
+    }
+    write_reference_method(
+        dir,
+        REFERENCE_FILL,
+        &format!(
+            "no prior in the NeRF; one training view filled in 2D by the prior '{prior}' \
+             (cargo xtask fill) is the reference"
+        ),
+        &view.name,
+        &png,
+    )
 }
 
 /// For each row, whether it beats the `none` row on each column.
@@ -173,6 +294,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.seeds.as_deref(),
             &args.work,
             args.reuse_finished,
+            ExtraRows {
+                oracle: args.oracle,
+                fill: args.fill_reference,
+            },
         )?;
         let path = args.out.join(format!("quality-{name}-{stamp}.json"));
         gb_core::write_atomic(&path, &serde_json::to_vec_pretty(&report)?)
@@ -186,13 +311,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// seed 0 and the preset's training seed), run into `work` (reusing finished runs when
 /// `reuse_finished`), as the mean tables over seeds with their comparison against `none`.
 /// A run that fails is recorded in the report's `error`; a scene that cannot be generated or
-/// a grid whose tables cannot be read is an error.
+/// a grid whose tables cannot be read is an error. `extra` adds the `reference-*` rows
+/// (module docs).
 pub fn run_scene(
     name: SceneName,
     grid: &crate::GridArgs,
     seeds: Option<&[u64]>,
     work: &Path,
     reuse_finished: bool,
+    extra: ExtraRows,
 ) -> anyhow::Result<Value> {
     let depth = match grid.depth {
         Some(d) => d,
@@ -225,12 +352,29 @@ pub fn run_scene(
                 work.join(name.to_string()),
             ),
         };
-        procedural::write(&opts, &scene_dir)
+        let generated = procedural::write(&opts, &scene_dir)
             .with_context(|| format!("generating {name} into {}", scene_dir.display()))?;
+        let mut methods = grid.methods.clone();
+        let mut extra_files = Vec::new();
+        if extra.oracle {
+            extra_files.push(write_reference_oracle(&generated, &scene_dir, &runs)?);
+        }
+        if extra.fill {
+            let prior = grid.prior.clone().unwrap_or_else(|| "tiny".into());
+            let device = grid.device.unwrap_or_default();
+            extra_files.push(write_reference_fill(
+                &generated, &scene_dir, &runs, &prior, device,
+            )?);
+        }
+        if !extra_files.is_empty() {
+            let mut list = methods.unwrap_or_else(|| grid::grid_methods(None));
+            list.extend(extra_files.iter().map(|f| f.display().to_string()));
+            methods = Some(list);
+        }
         // the method grid without the w3 sweep, run in this process
         let outcome = Grid::plan(
             grid.settings(scene_dir.clone(), *seed),
-            grid.methods.as_deref(),
+            methods.as_deref(),
             Some(&[]),
             &runs,
         )
@@ -287,6 +431,12 @@ pub fn run_scene(
         "preset": grid.preset,
         "prior": grid.prior.clone().unwrap_or_else(|| "tiny".into()),
         "device": grid.device.unwrap_or_default().name(),
+        "oracle_rows": if extra.oracle {
+            json!({REFERENCE_ORACLE: "ORACLE, not a method: the none method with one training view's \
+                exact object-free image (the scene's clean/) as its reference view"})
+        } else {
+            Value::Null
+        },
         "training_seeds": seeds,
         "wall_seconds": started.elapsed().as_secs_f64(),
         "baselines": baselines,

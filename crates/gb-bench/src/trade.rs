@@ -227,6 +227,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Some(&args.seeds),
             &args.work.join(&label),
             args.reuse_finished,
+            crate::quality::ExtraRows::default(),
         )
         .with_context(|| format!("preset {preset}"))?;
         reports.push((label, report));

@@ -123,6 +123,9 @@ pub enum InpaintError {
     /// The score distillation failed.
     #[error("score distillation: {0}")]
     Distill(#[from] DistillError),
+    /// 2D inpainting with the prior (`fill`) failed.
+    #[error("2D inpainting: {0}")]
+    Sample(#[from] gb_diffusion::inpaint::InpaintError),
     /// Per-scene personalisation of the prior failed ([`crate::personalize`]).
     #[error("personalisation: {reason}")]
     Personalize {

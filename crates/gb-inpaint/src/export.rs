@@ -48,6 +48,36 @@ use crate::error::InpaintError;
 use crate::gif::{orbit_path, ORBIT_FPS};
 use crate::GuidedTrainer;
 
+/// Whether a run writes the nerfstudio export (`--export`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ExportMode {
+    /// `OUT/export/`: every training view rendered, its depth, the cameras and the orbit.
+    #[default]
+    Full,
+    /// No export (the benchmarks: it costs about as much as the test renders and the
+    /// metrics together).
+    None,
+}
+
+impl std::str::FromStr for ExportMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "full" => Ok(Self::Full),
+            "none" => Ok(Self::None),
+            _ => Err(format!("'{s}': expected full or none")),
+        }
+    }
+}
+
+impl ExportMode {
+    /// True for [`ExportMode::Full`].
+    pub fn enabled(self) -> bool {
+        self == ExportMode::Full
+    }
+}
+
 /// What [`write_export`] wrote.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct ExportInfo {

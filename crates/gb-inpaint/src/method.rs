@@ -287,6 +287,14 @@ pub struct MethodConfig {
         skip_serializing_if = "crate::personalize::PersonalizeSettings::is_default"
     )]
     pub personalize: crate::personalize::PersonalizeSettings,
+    /// Reference views: images of training views without the object that supervise the
+    /// field and are carried to the other views (off by default; see [`crate::reference`]).
+    /// Left out of the written config while it is the default.
+    #[serde(
+        default,
+        skip_serializing_if = "crate::reference::ReferenceConfig::is_default"
+    )]
+    pub reference: crate::reference::ReferenceConfig,
 }
 
 fn default_lambda() -> f64 {
@@ -390,6 +398,9 @@ impl MethodConfig {
         if let Some(msg) = self.visibility.check() {
             return Err(msg.into());
         }
+        if let Some(msg) = self.reference.check() {
+            return Err(msg);
+        }
         for (table, settings) in [("rgb", &self.rgb), ("normal", &self.normal)] {
             if let Some(s) = settings {
                 s.validate().map_err(|e| format!("[{table}] {e}"))?;
@@ -423,6 +434,12 @@ impl MethodConfig {
     /// `step * total_steps / reference_steps` (rounded down).
     fn scaled_to_run(&self, step: usize, total_steps: usize) -> usize {
         ((step as u128 * total_steps as u128) / self.reference_steps.max(1) as u128) as usize
+    }
+
+    /// The first step of the reference's carrying in a run of `total_steps` steps
+    /// (`reference.start_step`, scaled like [`Self::normal_start_for`]).
+    pub fn reference_start_for(&self, total_steps: usize) -> usize {
+        self.scaled_to_run(self.reference.start_step, total_steps)
     }
 
     /// The first step of the normal guidance in a run of `total_steps` steps:

@@ -115,6 +115,10 @@ pub struct GuidedState {
     pub totals: RunTotals,
     /// Visibility maps of the guided views, by view.
     pub visibility: Vec<SavedMap>,
+    /// The pixels carried from the reference views ([`crate::reference`]); absent in runs
+    /// without a reference (and in checkpoints from before references).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_carry: Option<crate::reference::CarriedSet>,
 }
 
 /// The identity of a run: `method` (without its free-text `description`) and, for guided
@@ -270,9 +274,26 @@ mod tests {
             identity_toml: String::new(),
             totals: totals.clone(),
             visibility: vec![SavedMap::new(5, &map)],
+            reference_carry: Some(crate::reference::CarriedSet {
+                step: 3,
+                pixels: vec![crate::reference::CarriedPixel {
+                    view: 1,
+                    x: 2,
+                    y: 4,
+                    rgb: [0.1, 0.2, 0.7],
+                }],
+                tested: 9,
+            }),
         };
         let back: GuidedState =
             serde_json::from_str(&serde_json::to_string(&state).unwrap()).unwrap();
+        assert_eq!(back.reference_carry, state.reference_carry);
+        let without = GuidedState {
+            reference_carry: None,
+            ..state.clone()
+        };
+        let text = serde_json::to_string(&without).unwrap();
+        assert!(!text.contains("reference_carry"), "{text}");
         assert_eq!(back.totals, totals);
         assert_eq!(back.visibility[0].to_map(), (5, map));
     }

@@ -63,6 +63,7 @@ use crate::error::InpaintError;
 use crate::guidance::{distiller_for, guidance_term, Modality, TermConditioning, TermOutput};
 use crate::method::{MethodConfig, Prompts};
 use crate::prior::GuidancePrior;
+use crate::reference::{CarriedSet, ReferenceState, ReferenceView};
 use crate::resume::{self, GuidedState, RunTotals, SavedMap};
 use crate::visibility::{gate_gradient, ObservedMap};
 use gb_nerf::train::checkpoint::{self, CheckpointParts};
@@ -165,6 +166,22 @@ pub struct StepRecord {
     pub seconds: f64,
     /// The guidance terms of the step (empty on unguided steps).
     pub guidance: Vec<TermRecord>,
+    /// The reference term of the step (absent in runs without a reference).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference: Option<ReferenceRecord>,
+}
+
+/// The reference term of one step, as logged ([`crate::reference`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct ReferenceRecord {
+    /// `weight * MSE` of the reference rays.
+    pub loss: Option<f64>,
+    /// Rays through the reference views' masked pixels.
+    pub direct_rays: usize,
+    /// Rays through pixels carried to other views.
+    pub carried_rays: usize,
+    /// Carried pixels available (0 before the carrying starts).
+    pub carried_pixels: usize,
 }
 
 /// Summary of a [`GuidedTrainer::fit`] call: `steps_run` and `seconds` count this call
@@ -215,6 +232,10 @@ pub struct GuidedTrainer {
     pub method: MethodConfig,
     /// The guidance (`None` for methods without a prior).
     pub guidance: Option<GuidanceState>,
+    /// The reference views ([`Self::set_references`]; `None`: no reference).
+    pub reference: Option<ReferenceState>,
+    /// Carried pixels restored from a checkpoint, handed to the references when they are set.
+    restored_carry: Option<CarriedSet>,
     /// Counters of the whole run (restored on resume).
     pub totals: RunTotals,
     /// The run's identity ([`resume::identity`]), stored in checkpoints.
@@ -244,6 +265,9 @@ impl std::ops::DerefMut for GuidedTrainer {
         &mut self.nerf
     }
 }
+
+/// The salt of the reference term's random stream.
+const REFERENCE_SALT: u64 = 0x5EF;
 
 /// A seed for `(seed, step, salt)` (SplitMix64 finaliser).
 fn derive_seed(seed: u64, step: usize, salt: u64) -> u64 {
@@ -422,6 +446,7 @@ impl GuidedTrainer {
         let mut t = Self::from_base(nerf, scene, method, guidance)?;
         if let Some(st) = state {
             t.totals = st.totals;
+            t.restored_carry = st.reference_carry;
             if let Some(g) = t.guidance.as_mut() {
                 g.visibility = st.visibility.iter().map(SavedMap::to_map).collect();
             }
@@ -456,6 +481,7 @@ impl GuidedTrainer {
             identity_toml,
             totals: self.totals.clone(),
             visibility,
+            reference_carry: self.reference.as_ref().and_then(|r| r.carried.clone()),
         };
         serde_json::to_value(&state).map_err(|e| state_error(e.to_string()))
     }
@@ -494,6 +520,8 @@ impl GuidedTrainer {
             nerf,
             method,
             guidance,
+            reference: None,
+            restored_carry: None,
             totals: RunTotals::default(),
             identity,
             nan_streak: 0,
@@ -502,6 +530,55 @@ impl GuidedTrainer {
                 .ok()
                 .and_then(|v| v.parse().ok()),
         })
+    }
+
+    /// Attaches the run's reference views ([`crate::reference`], settings from the method's
+    /// `[reference]` table); an empty list removes them. A resumed trainer gets back the
+    /// carried pixels of its checkpoint. The guidance no longer draws the reference views
+    /// (the reference fills their masks) unless every guided view has a reference.
+    pub fn set_references(&mut self, views: Vec<ReferenceView>) {
+        if views.is_empty() {
+            self.reference = None;
+            return;
+        }
+        let indices: Vec<usize> = views.iter().map(|r| r.view).collect();
+        if let Some(g) = self.guidance.as_mut() {
+            let rest: Vec<usize> = g
+                .views
+                .iter()
+                .copied()
+                .filter(|v| !indices.contains(v))
+                .collect();
+            if !rest.is_empty() {
+                g.views = rest;
+            }
+        }
+        self.reference = Some(ReferenceState {
+            config: self.method.reference.clone(),
+            views,
+            carried: self.restored_carry.take(),
+            carry_start: self
+                .method
+                .reference_start_for(self.nerf.config.train.steps),
+        });
+    }
+
+    /// The reference term of `step` (refreshing the carried pixels when due), or `None`.
+    fn reference_term(
+        &mut self,
+        step: usize,
+    ) -> Result<Option<(crate::reference::ReferenceTerm, usize)>, InpaintError> {
+        let Some(mut state) = self.reference.take() else {
+            return Ok(None);
+        };
+        let seed = derive_seed(self.nerf.config.train.seed, step, REFERENCE_SALT);
+        let ctx = self.render_context();
+        let result = state
+            .refresh(&ctx, &self.nerf.data.views, step)
+            .map(|_| state.loss(&ctx, &self.nerf.data.views, seed));
+        let carried = state.carried.as_ref().map_or(0, |c| c.pixels.len());
+        self.reference = Some(state);
+        Ok(result?.map(|t| (t, carried)))
     }
 
     /// The first step of the normal guidance in this run.
@@ -597,6 +674,11 @@ impl GuidedTrainer {
         });
         if stale {
             let margin = self.method.crop_margin;
+            let references = self
+                .reference
+                .as_ref()
+                .map(ReferenceState::view_indices)
+                .unwrap_or_default();
             let computed = ObservedMap::compute(
                 &self.render_context(),
                 &self.nerf.data.views,
@@ -604,6 +686,7 @@ impl GuidedTrainer {
                 margin,
                 &cfg,
                 step,
+                &references,
             )
             .map_err(NerfError::from)?;
             let Some(map) = computed else {
@@ -790,7 +873,7 @@ impl GuidedTrainer {
         let do_rgb = g.rgb.is_some() && self.method.lambda_rgb > 0.0;
         let do_normal =
             g.normal.is_some() && self.method.lambda_normal > 0.0 && step >= self.normal_start();
-        if !(do_rgb || do_normal) {
+        if !(do_rgb || do_normal) || g.views.is_empty() {
             return Ok((outs, records));
         }
         let mut pick = ChaCha8Rng::seed_from_u64(derive_seed(self.nerf.config.train.seed, step, 0));
@@ -830,22 +913,24 @@ impl GuidedTrainer {
         let step = self.nerf.step;
         let recon = self.nerf.reconstruction_loss();
         let (terms, records) = self.guidance_terms(step)?;
+        let reference = self.reference_term(step)?;
         let mut loss = recon.loss.clone();
         for t in terms {
             loss = loss + t.loss;
         }
+        if let Some((t, _)) = &reference {
+            loss = loss + t.loss.clone();
+        }
         if self.inject_nan_from_step.is_some_and(|s| step >= s) {
             loss = loss.add_scalar(f32::NAN);
         }
+        let mut read = vec![recon.loss.detach(), loss.clone().detach(), recon.rgb_mse];
+        if let Some((t, _)) = &reference {
+            read.push(t.loss.clone().detach());
+        }
         // one read for the step's own values (the guidance terms read their diagnostics)
-        let values = gb_core::read_f32(
-            Tensor::cat(
-                vec![recon.loss.detach(), loss.clone().detach(), recon.rgb_mse],
-                0,
-            ),
-            "step losses",
-        )
-        .map_err(gb_nerf::train::NerfError::from)?;
+        let values = gb_core::read_f32(Tensor::cat(read, 0), "step losses")
+            .map_err(gb_nerf::train::NerfError::from)?;
         let (recon_value, loss_value, rgb_mse) = (values[0], values[1], values[2]);
         let finite = |v: f32| v.is_finite().then_some(v as f64);
         let mut record = StepRecord {
@@ -858,6 +943,12 @@ impl GuidedTrainer {
             evaluations_per_ray: recon.evaluations_per_ray,
             seconds: 0.0,
             guidance: records,
+            reference: reference.map(|(t, carried)| ReferenceRecord {
+                loss: values.get(3).copied().and_then(finite),
+                direct_rays: t.direct_rays,
+                carried_rays: t.carried_rays,
+                carried_pixels: carried,
+            }),
         };
         if self.nerf.apply_loss_valued(loss, loss_value)? {
             self.nan_streak = 0;

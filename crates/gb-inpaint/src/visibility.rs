@@ -146,8 +146,10 @@ pub struct ObservedMap {
 
 impl ObservedMap {
     /// The map of training view `index` (crop `margin`, module docs) from the field of
-    /// `ctx` at `step`; `None` when the view has no guidance crop. Errors when a rendered
-    /// depth does not hold `f32` values (never a silently misaligned map).
+    /// `ctx` at `step`; `None` when the view has no guidance crop. The training views of
+    /// `references` have a reference image ([`crate::reference`]): their masked pixels count
+    /// as observing too, and a reference view's own masked pixels are all observed. Errors
+    /// when a rendered depth does not hold `f32` values (never a silently misaligned map).
     pub fn compute(
         ctx: &RenderContext<'_>,
         views: &[TrainView],
@@ -155,6 +157,7 @@ impl ObservedMap {
         margin: f32,
         cfg: &VisibilityConfig,
         step: usize,
+        references: &[usize],
     ) -> Result<Option<Self>, TensorValuesError> {
         let rv = cfg.resolution.max(1);
         let Some(geometry) = views
@@ -163,6 +166,18 @@ impl ObservedMap {
         else {
             return Ok(None);
         };
+        if references.contains(&index) {
+            let mut observed = vec![false; rv * rv];
+            for &i in &geometry.masked {
+                observed[i] = true;
+            }
+            return Ok(Some(Self {
+                resolution: rv,
+                observed,
+                masked: geometry.masked.len(),
+                step,
+            }));
+        }
         let camera = geometry.camera(rv);
         let grid = all_pixels(rv, rv);
         let pixels: Vec<[f32; 2]> = geometry.masked.iter().map(|&i| grid[i]).collect();
@@ -194,10 +209,11 @@ impl ObservedMap {
                     continue;
                 }
                 let (x, y) = (px as usize, py as usize);
-                if other
-                    .mask
-                    .as_ref()
-                    .is_some_and(|m| m.data.get(y * m.width + x).copied().unwrap_or(true))
+                if !references.contains(&j)
+                    && other
+                        .mask
+                        .as_ref()
+                        .is_some_and(|m| m.data.get(y * m.width + x).copied().unwrap_or(true))
                 {
                     continue;
                 }
@@ -249,7 +265,7 @@ impl ObservedMap {
 }
 
 /// The z-depth that `field` (a no-graph copy) renders along `rays`, in chunks.
-fn render_depth(
+pub(crate) fn render_depth(
     field: &NerfField,
     ctx: &RenderContext<'_>,
     rays: &RayBatch,

@@ -6,7 +6,7 @@
 //!     [--lora FILE] [--prompt P] [--negative-prompt N] [--normal-prompt G] [--device D]
 //!     [--precision f32|f16] [--out DIR] [--resume] [--steps N] [--seed N]
 //!     [--depth sparse|dense|none] [--personalize STEPS] [--baseline DIR] [--weights DIR]
-//!     [--orbit-frames N]
+//!     [--orbit-frames N] [--reference VIEW=IMAGE ...] [--export full|none]
 //! ```
 //!
 //! - `--method`: a built-in method (`configs/methods/`: gb-nerf, gb-nerf-unseen, bsd,
@@ -119,6 +119,17 @@ pub struct Args {
     /// default: the method's `[personalize] steps`).
     #[arg(long, value_name = "STEPS")]
     pub personalize: Option<usize>,
+    /// A reference view, repeatable: VIEW (a training view's file name) with the object
+    /// removed, as IMAGE (a clean plate or any 2D fill, at the scene's image size). It
+    /// supervises the colour inside VIEW's mask and is carried to the other views through
+    /// the rendered depth; the guidance acts only where no reference reaches.
+    #[arg(long = "reference", value_name = "VIEW=IMAGE")]
+    pub references: Vec<String>,
+    /// The nerfstudio export of the inpainted scene, `OUT/export/`: full (every training view
+    /// rendered, with depth and cameras) or none (on a real capture it takes about as long as
+    /// the training on a CPU).
+    #[arg(long, default_value = "full", value_name = "full|none")]
+    pub export: gb_inpaint::export::ExportMode,
     /// Another run's output folder (or its `renders/`): its test-view renders are the
     /// baseline column of `report.html` (default: the masked input, said so on the page).
     #[arg(long)]
@@ -153,11 +164,13 @@ impl Args {
             steps: self.steps,
             depth: self.depth,
             personalize: self.personalize,
+            references: self.references.clone(),
             out: self.out.clone(),
             resume: self.resume,
             baseline: self.baseline.clone(),
             weights: self.weights.clone(),
             orbit_frames: self.orbit_frames,
+            export: self.export,
             progress: true,
             program: crate::program_name().into(),
         }

@@ -4,6 +4,7 @@ pub mod ablate;
 pub mod devices;
 pub mod distill_image;
 pub mod eval;
+pub mod fill;
 pub mod finetune;
 pub mod fuzz;
 pub mod inpaint;

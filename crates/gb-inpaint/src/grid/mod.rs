@@ -17,6 +17,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 pub use merge::{merge, MergeReport};
+pub use plan::grid_methods;
 
 use crate::ablate::RunOutcome;
 use crate::error::InpaintError;
@@ -54,6 +55,14 @@ pub struct GridSettings {
     pub weights: Option<PathBuf>,
     /// Frames of each run's orbit animation.
     pub orbit_frames: usize,
+    /// Whether each run writes the nerfstudio export (absent in grids from before the
+    /// setting: full).
+    #[serde(default, skip_serializing_if = "is_full_export")]
+    pub export: crate::export::ExportMode,
+}
+
+fn is_full_export(m: &crate::export::ExportMode) -> bool {
+    *m == crate::export::ExportMode::Full
 }
 
 /// One run of the grid.
@@ -158,6 +167,7 @@ impl Grid {
             baseline,
             weights: s.weights.clone(),
             orbit_frames: s.orbit_frames,
+            export: s.export,
             ..RunSpec::default()
         })
     }

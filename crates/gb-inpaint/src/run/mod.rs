@@ -65,6 +65,9 @@ pub struct RunSpec {
     pub depth: Option<DepthSupervision>,
     /// Overrides the method's personalisation steps (`[personalize] steps`; 0: off).
     pub personalize: Option<usize>,
+    /// Reference views, `VIEW=IMAGE` (`--reference`, repeatable; added to the method's
+    /// `[reference] images`; see [`crate::reference`]).
+    pub references: Vec<String>,
     /// The output folder.
     pub out: PathBuf,
     /// Continue from `OUT/checkpoint.bin` when it exists.
@@ -75,6 +78,8 @@ pub struct RunSpec {
     pub weights: Option<PathBuf>,
     /// Frames of `orbit.gif` (0: none).
     pub orbit_frames: usize,
+    /// Whether to write the nerfstudio export (`--export`).
+    pub export: crate::export::ExportMode,
     /// Show progress bars.
     pub progress: bool,
     /// The command that runs `inpaint`, for `config.toml`'s reproducing line: `cargo xtask`
@@ -97,11 +102,13 @@ impl Default for RunSpec {
             steps: None,
             depth: None,
             personalize: None,
+            references: Vec::new(),
             out: PathBuf::from("out/inpaint"),
             resume: false,
             baseline: None,
             weights: None,
             orbit_frames: 24,
+            export: crate::export::ExportMode::Full,
             progress: false,
             program: "gb-nerf".into(),
         }
@@ -207,6 +214,14 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     if let Some(steps) = spec.personalize {
         method.personalize.steps = steps;
     }
+    for raw in &spec.references {
+        let pair =
+            crate::reference::ReferencePair::parse(raw).map_err(|reason| InpaintError::Spec {
+                field: "--reference".into(),
+                reason,
+            })?;
+        method.reference.images.push(pair.to_absolute_string());
+    }
     let mut config = load_preset(&spec.preset)?;
     if let Some(steps) = spec.steps {
         config.train.steps = steps;
@@ -221,6 +236,11 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
 
     let (scene_dir, mut scene) = setup::load_or_generate(spec)?;
     setup::require_masks(&scene)?;
+    let references = crate::reference::load_references(
+        &scene,
+        &method.reference.images,
+        config.train.image_downscale,
+    )?;
     let pre = if method.pre_inpainted {
         let report = crate::pre_inpainted::apply(&mut scene, &scene_dir)?;
         // SPIn-NeRF supervises with its inpainted depth maps, densely (unless `--depth` says)
@@ -262,6 +282,15 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     } else {
         GuidedTrainer::new(&scene, config, method.clone(), guidance, device)?
     };
+    if !references.is_empty() {
+        tracing::info!(
+            views = ?references.iter().map(|r| r.name.as_str()).collect::<Vec<_>>(),
+            pixels = references.iter().map(|r| r.pixels.len()).sum::<usize>(),
+            carry_start = method.reference_start_for(trainer.config.train.steps),
+            "reference views"
+        );
+    }
+    trainer.set_references(references);
     config_file::write_config(
         spec,
         &config_file::ResolvedRun {
@@ -315,10 +344,16 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     let views = tested.metrics(&eval);
     let eval_seconds = eval_start.elapsed().as_secs_f64();
     let orbit = crate::gif::write_orbit(out, &scene, &trainer, spec.orbit_frames)?;
-    let mut export =
-        crate::export::write_export(&out.join("export"), &scene, &trainer, spec.orbit_frames)?;
-    // relative to the run folder, like `report`: metrics.json does not depend on where it lies
-    export.folder = PathBuf::from("export");
+    let export = if spec.export.enabled() {
+        let mut export =
+            crate::export::write_export(&out.join("export"), &scene, &trainer, spec.orbit_frames)?;
+        // relative to the run folder, like `report`: metrics.json does not depend on where it
+        // lies
+        export.folder = PathBuf::from("export");
+        Some(export)
+    } else {
+        None
+    };
     let per_step = |secs: f64, n: usize| (n > 0).then(|| secs / n as f64);
     let summary = RunSummary {
         method: method.name.clone(),

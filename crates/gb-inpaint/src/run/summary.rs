@@ -122,8 +122,9 @@ pub struct RunSummary {
     pub render_seconds: f64,
     /// Wall time of the metrics, s.
     pub eval_seconds: f64,
-    /// The nerfstudio export (`export/`).
-    pub export: ExportInfo,
+    /// The nerfstudio export (`export/`; absent with `--export none`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub export: Option<ExportInfo>,
     /// The orbit animation, when one was written.
     pub orbit: Option<OrbitSummary>,
     /// The preset's samples per ray.

@@ -13,6 +13,8 @@
 //!                            the mask when any of its 2x2 subsamples sees the object first),
 //!                            grown by `dilate` pixels
 //! images_1/test_label/NAME.png  test masks: where the object would be (same rule)
+//! clean/NAME.png             every TRAIN view rendered WITHOUT the object (exact ground
+//!                            truth for oracle experiments; no loader reads it unless told)
 //! depth_1/NAME.npy           float32 [H, W]: z-depth of the pixel-centre ray's first hit,
 //!                            i.e. the distance along the camera's viewing axis (-z), in
 //!                            world units; 0 = no hit (does not occur in the built-in scenes).

@@ -1,0 +1,254 @@
+//! `cargo xtask fill`: a reference view ([`crate::reference`]) from the prior itself, for a
+//! user without a 2D inpainting tool. Multi-step sampling (DDIM with classifier-free
+//! guidance, the known region blended in after each step), not distillation.
+//!
+//! The view's guidance crop (its mask's bounding box grown by `margin`, as the guided run
+//! crops it: [`CropGeometry`]) is resampled to the prior's resolution, inpainted with the
+//! prompts the guided methods use (the scene's captions in `"RGB image, {caption}"`,
+//! negative `"RGB image, {object_caption}"`) and the prior's geometric LoRA when it has one,
+//! and pasted back into the masked pixels only (bilinear): every pixel outside the mask is
+//! the input's.
+
+use std::path::{Path, PathBuf};
+
+use gb_core::RgbImage;
+use gb_diffusion::inpaint::{inpaint, InpaintPrior, InpaintRequest};
+use gb_nerf::render::rays::crop_pixels;
+use gb_nerf::scene::{Scene, Split};
+use gb_nerf::train::data::prepare_view;
+
+use crate::crop::CropGeometry;
+use crate::error::InpaintError;
+use crate::method::{PromptOverrides, SceneCaptions};
+use crate::prior::LORA_FILE_NAME;
+
+/// What `fill` needs besides the scene and the view.
+#[derive(Debug, Clone)]
+pub struct FillOptions {
+    /// `tiny`, a diffusers inpainting folder or a hub id.
+    pub prior: String,
+    /// LoRA files merged in order; `None`: the prior's own geometric LoRA when it has one.
+    pub lora: Option<Vec<PathBuf>>,
+    /// Prompts replacing the guided methods' templates.
+    pub prompts: PromptOverrides,
+    /// DDIM steps.
+    pub steps: usize,
+    /// Classifier-free guidance scale (diffusers' convention).
+    pub guidance: f64,
+    /// Seed of the initial noise.
+    pub seed: u64,
+    /// Crop margin (the guided run's `crop_margin`).
+    pub margin: f32,
+    /// The backend.
+    pub device: gb_core::BackendKind,
+}
+
+impl Default for FillOptions {
+    fn default() -> Self {
+        Self {
+            prior: "tiny".into(),
+            lora: None,
+            prompts: PromptOverrides::default(),
+            steps: 50,
+            guidance: 7.5,
+            seed: 0,
+            margin: 0.25,
+            device: gb_core::BackendKind::default(),
+        }
+    }
+}
+
+/// What [`fill_view`] made.
+#[derive(Debug, Clone)]
+pub struct Fill {
+    /// The view at full resolution with its masked pixels filled.
+    pub image: RgbImage,
+    /// The view's file stem.
+    pub view: String,
+    /// The prior folder.
+    pub prior: PathBuf,
+    /// The LoRA files merged.
+    pub lora: Vec<PathBuf>,
+    /// The prompt and negative prompt.
+    pub prompts: (String, String),
+    /// Masked pixels filled.
+    pub filled_pixels: usize,
+}
+
+/// Bilinear sample of `img` at continuous pixel coordinates (pixel centres at `+0.5`),
+/// clamped at the border.
+fn bilinear(img: &RgbImage, x: f32, y: f32) -> [f32; 3] {
+    let fx = (x - 0.5).clamp(0.0, (img.width - 1) as f32);
+    let fy = (y - 0.5).clamp(0.0, (img.height - 1) as f32);
+    let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+    let (x1, y1) = ((x0 + 1).min(img.width - 1), (y0 + 1).min(img.height - 1));
+    let (ax, ay) = (fx - x0 as f32, fy - y0 as f32);
+    let (a, b, c, d) = (
+        img.get(x0, y0),
+        img.get(x1, y0),
+        img.get(x0, y1),
+        img.get(x1, y1),
+    );
+    [0, 1, 2].map(|k| {
+        (a[k] * (1.0 - ax) + b[k] * ax) * (1.0 - ay) + (c[k] * (1.0 - ax) + d[k] * ax) * ay
+    })
+}
+
+fn view_error(view: &str, scene: &Path, reason: String) -> InpaintError {
+    InpaintError::Spec {
+        field: format!("--view {view} (scene {})", scene.display()),
+        reason,
+    }
+}
+
+/// Fills the masked pixels of training view `view` (a file name or stem) of `scene`
+/// (loaded from `scene_dir`) with the prior (module docs). Errors name the flag: an unknown
+/// view, a view without a mask, a prior or LoRA that does not load.
+pub fn fill_view(
+    scene: &Scene,
+    scene_dir: &Path,
+    view: &str,
+    opts: &FillOptions,
+) -> Result<Fill, InpaintError> {
+    let stem = Path::new(view)
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_else(|| view.to_string());
+    let v = scene
+        .split(Split::Train)
+        .find(|v| v.name == view || v.name == stem)
+        .ok_or_else(|| {
+            view_error(
+                view,
+                scene_dir,
+                format!("'{view}' is not a training view of scene '{}'", scene.name),
+            )
+        })?;
+    let full = prepare_view(v, 1);
+    if opts.steps == 0 {
+        return Err(InpaintError::Spec {
+            field: "--steps".into(),
+            reason: "must be at least 1".into(),
+        });
+    }
+    let prior_dir = gb_diffusion::checkpoint::resolve_prior(&opts.prior)?;
+    let device = opts.device.device();
+    let mut prior = InpaintPrior::load(&prior_dir, &device)?;
+    let lora = match &opts.lora {
+        Some(list) => list.clone(),
+        None => {
+            let own = prior_dir.join(LORA_FILE_NAME);
+            if own.is_file() {
+                vec![own]
+            } else {
+                Vec::new()
+            }
+        }
+    };
+    for l in &lora {
+        prior = prior
+            .with_lora(l)
+            .map_err(|e| InpaintError::Lora {
+                path: l.clone(),
+                reason: e.to_string(),
+            })?
+            .0;
+    }
+    let r = prior.unet_config.sample_size.unwrap_or(64) * prior.vae_scale_factor;
+    let geometry = CropGeometry::new(&full, opts.margin, r).ok_or_else(|| {
+        view_error(
+            view,
+            scene_dir,
+            format!("view '{}' has no mask, so there is nothing to fill", v.name),
+        )
+    })?;
+    let positions = crop_pixels(geometry.bbox, r, r);
+    let mut rgb = Vec::with_capacity(r * r * 3);
+    for [px, py] in &positions {
+        rgb.extend_from_slice(&bilinear(&full.image, *px, *py));
+    }
+    let mask: Vec<f32> = geometry
+        .mask
+        .iter()
+        .map(|m| f32::from(u8::from(*m)))
+        .collect();
+    let captions = SceneCaptions::read(scene_dir);
+    let method = crate::MethodConfig::load(crate::run::DEFAULT_METHOD)?;
+    let prompts = method.resolve_prompts(&captions, &opts.prompts);
+    let req = InpaintRequest {
+        width: r,
+        height: r,
+        rgb,
+        mask,
+        prompt: prompts.appearance.clone(),
+        negative_prompt: prompts.negative.clone(),
+        steps: opts.steps,
+        guidance: opts.guidance,
+        seed: opts.seed,
+        init_latents: None,
+        blend_known: true,
+    };
+    let bar = gb_core::progress::bar(opts.steps as u64).with_message("fill");
+    let out = inpaint(&prior, &req, |_, _| bar.inc(1))?;
+    bar.finish_and_clear();
+    let values = gb_core::read_f32(out, "filled crop").map_err(gb_nerf::train::NerfError::from)?;
+    // [1, 3, r, r] planar to an RgbImage
+    let mut crop = RgbImage::filled(r, r, [0.0; 3]);
+    for i in 0..r * r {
+        crop.set(
+            i % r,
+            i / r,
+            [values[i], values[r * r + i], values[2 * r * r + i]],
+        );
+    }
+    let (x0, y0, x1, y1) = geometry.bbox;
+    let (bw, bh) = ((x1 - x0) as f32, (y1 - y0) as f32);
+    let mut image = v.image.clone();
+    let m = full.mask.as_ref().expect("a crop implies a mask");
+    let mut filled = 0;
+    for y in 0..m.height {
+        for x in 0..m.width {
+            if m.data[y * m.width + x] {
+                let u = (x as f32 + 0.5 - x0 as f32) / bw * r as f32;
+                let w = (y as f32 + 0.5 - y0 as f32) / bh * r as f32;
+                image.set(x, y, bilinear(&crop, u, w));
+                filled += 1;
+            }
+        }
+    }
+    Ok(Fill {
+        image,
+        view: v.name.clone(),
+        prior: prior_dir,
+        lora,
+        prompts: (prompts.appearance, prompts.negative),
+        filled_pixels: filled,
+    })
+}
+
+/// Loads the scene folder `scene_dir` and fills its view `view` ([`fill_view`]).
+pub fn fill(scene_dir: &Path, view: &str, opts: &FillOptions) -> Result<Fill, InpaintError> {
+    let (_, scene) = gb_nerf::scene::load(scene_dir, &gb_nerf::scene::LoadOptions::default())
+        .map_err(|source| InpaintError::Scene {
+            what: "loading scene",
+            path: scene_dir.to_path_buf(),
+            source: Box::new(source),
+        })?;
+    fill_view(&scene, scene_dir, view, opts)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bilinear_interpolates_between_pixel_centres_and_clamps_at_the_border() {
+        let mut img = RgbImage::filled(2, 1, [0.0; 3]);
+        img.set(1, 0, [1.0, 0.5, 0.0]);
+        assert_eq!(bilinear(&img, 0.5, 0.5), [0.0; 3]);
+        assert_eq!(bilinear(&img, 1.5, 0.5), [1.0, 0.5, 0.0]);
+        assert_eq!(bilinear(&img, 1.0, 0.5), [0.5, 0.25, 0.0]);
+        assert_eq!(bilinear(&img, -3.0, 9.0), [0.0; 3]);
+        assert_eq!(bilinear(&img, 7.0, 0.5), [1.0, 0.5, 0.0]);
+    }
+}

@@ -1,0 +1,498 @@
+//! Reference views: one training view with the object removed (a clean plate, or a 2D fill
+//! from any tool) supervises the NeRF inside that view's mask, and is carried to the other
+//! training views through the rendered depth. This is how the methods that lead SPIn-NeRF's
+//! benchmark (3DGIC, GScream, InFusion) use a 2D inpainter: the geometry, not the prior's
+//! strength, spreads one good fill over every view.
+//!
+//! - `--reference VIEW=IMAGE` (repeatable; `[reference] images` in a method): VIEW is a
+//!   training view's file name (or stem), IMAGE that view without the object, at the scene's
+//!   image size. [`load_references`] checks both and names the flag and the file on every
+//!   error: an unknown view, a view without a mask, an unreadable image, a wrong size.
+//! - **Direct supervision** ([`ReferenceState::loss`]): every step, `rays` rays through the
+//!   reference views' masked pixels (and through the carried pixels below) are rendered and
+//!   their colour MSE against the reference, times `weight`, joins the step's loss. The rays,
+//!   the pixels and the jitter come from a stream seeded by `(seed, step)`, apart from the
+//!   reconstruction's, so a run without a reference is unchanged bit for bit and a resumed run
+//!   continues exactly.
+//! - **Carried to the other views** ([`carry::carry`]): from `start_step` (counted out of the
+//!   method's `reference_steps`, like the visibility maps) and every `refresh_every` steps,
+//!   each masked pixel of every other training view (on a stride grid of at most
+//!   `max_pixels_per_view`) is lifted to its surface point at the depth the current field
+//!   renders, and projected into each reference view. Where it lands inside that view's mask
+//!   and in front (the reference view renders a depth within `depth_tolerance`, relative, of
+//!   the point's: 3DGIC's depth test), the pixel gets the reference's colour there as its
+//!   target. Occluded pixels and pixels no reference reaches get none, and the guidance, if
+//!   the method has any, acts there as before. (Decision: a colour target, not ST-LPIPS: it
+//!   is per pixel, so it supervises rays drawn one by one like the reconstruction's.)
+//! - With visibility-aware guidance ([`crate::visibility`]) a reference view's masked pixels
+//!   count as observed: the prior guides only what neither a training view nor a reference
+//!   shows.
+
+pub mod carry;
+
+use std::path::{Path, PathBuf};
+
+use burn::tensor::{Tensor, TensorData};
+use gb_core::RgbImage;
+use gb_nerf::render::rays::camera_rays;
+use gb_nerf::render::render_rays;
+use gb_nerf::sampler::RayBatch;
+use gb_nerf::scene::{Scene, Split};
+use gb_nerf::train::data::{downscale_image, TrainView};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::crop::RenderContext;
+use crate::error::InpaintError;
+pub use carry::{CarriedPixel, CarriedSet};
+
+/// The `[reference]` table of a method (module docs). Left out of a written config while it
+/// is the default, so configs and checkpoints of runs without a reference read as before.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceConfig {
+    /// `VIEW=IMAGE` pairs (`--reference` adds to them); empty: no reference.
+    #[serde(default)]
+    pub images: Vec<String>,
+    /// Weight of the reference colour MSE (the reconstruction's colour MSE has weight 1).
+    #[serde(default = "default_weight")]
+    pub weight: f64,
+    /// Rays per step through reference and carried pixels.
+    #[serde(default = "default_rays")]
+    pub rays: usize,
+    /// Carry the reference to the other training views through the rendered depth.
+    #[serde(default = "default_true")]
+    pub carry: bool,
+    /// Share of the rays drawn from the carried pixels (once there are any).
+    #[serde(default = "default_share")]
+    pub carry_share: f32,
+    /// First step of the carrying, counted out of the method's `reference_steps` (the field
+    /// needs a geometry first).
+    #[serde(default = "default_start")]
+    pub start_step: usize,
+    /// Steps between recomputations of the carried pixels from the current field.
+    #[serde(default = "default_refresh")]
+    pub refresh_every: usize,
+    /// Relative depth agreement of the depth test.
+    #[serde(default = "default_tolerance")]
+    pub depth_tolerance: f32,
+    /// At most this many masked pixels of each other view are tested (a stride grid).
+    #[serde(default = "default_max_pixels")]
+    pub max_pixels_per_view: usize,
+}
+
+fn default_weight() -> f64 {
+    1.0
+}
+fn default_rays() -> usize {
+    256
+}
+fn default_true() -> bool {
+    true
+}
+fn default_share() -> f32 {
+    0.5
+}
+fn default_start() -> usize {
+    2000
+}
+fn default_refresh() -> usize {
+    100
+}
+fn default_tolerance() -> f32 {
+    0.05
+}
+fn default_max_pixels() -> usize {
+    4096
+}
+
+impl Default for ReferenceConfig {
+    fn default() -> Self {
+        Self {
+            images: Vec::new(),
+            weight: default_weight(),
+            rays: default_rays(),
+            carry: default_true(),
+            carry_share: default_share(),
+            start_step: default_start(),
+            refresh_every: default_refresh(),
+            depth_tolerance: default_tolerance(),
+            max_pixels_per_view: default_max_pixels(),
+        }
+    }
+}
+
+impl ReferenceConfig {
+    /// True for the default table (no reference, default settings).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// True when the run has a reference.
+    pub fn enabled(&self) -> bool {
+        !self.images.is_empty()
+    }
+
+    /// A message naming the first invalid field, if any.
+    pub fn check(&self) -> Option<String> {
+        if !(self.weight.is_finite() && self.weight >= 0.0) {
+            return Some(format!(
+                "reference.weight = {} must be a finite number >= 0",
+                self.weight
+            ));
+        }
+        if self.rays == 0 {
+            return Some("reference.rays must be >= 1".into());
+        }
+        if !(self.carry_share.is_finite() && (0.0..=1.0).contains(&self.carry_share)) {
+            return Some("reference.carry_share must be in [0, 1]".into());
+        }
+        if self.refresh_every == 0 {
+            return Some("reference.refresh_every must be >= 1".into());
+        }
+        if !(self.depth_tolerance.is_finite() && self.depth_tolerance > 0.0) {
+            return Some("reference.depth_tolerance must be a positive number".into());
+        }
+        if self.max_pixels_per_view == 0 {
+            return Some("reference.max_pixels_per_view must be >= 1".into());
+        }
+        self.images
+            .iter()
+            .find_map(|s| ReferencePair::parse(s).err())
+    }
+}
+
+/// One `VIEW=IMAGE` pair.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReferencePair {
+    /// A training view's file name or stem.
+    pub view: String,
+    /// The view without the object.
+    pub image: PathBuf,
+}
+
+impl ReferencePair {
+    /// Parses `VIEW=IMAGE` (split at the first `=`); the error names the flag.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s.split_once('=') {
+            Some((v, i)) if !v.trim().is_empty() && !i.trim().is_empty() => Ok(Self {
+                view: v.trim().to_string(),
+                image: PathBuf::from(i.trim()),
+            }),
+            _ => Err(format!(
+                "--reference {s}: expected VIEW=IMAGE (a training view's file name, then the \
+                 image of that view without the object)"
+            )),
+        }
+    }
+
+    /// `VIEW=IMAGE` with the image's path made absolute (a run's config reproduces it from
+    /// any folder).
+    pub fn to_absolute_string(&self) -> String {
+        let image = std::path::absolute(&self.image).unwrap_or_else(|_| self.image.clone());
+        format!("{}={}", self.view, image.display())
+    }
+}
+
+/// A loaded reference: training view `view`, its image at the training resolution, and its
+/// masked pixels (the pixels the reference supervises directly).
+#[derive(Debug, Clone)]
+pub struct ReferenceView {
+    /// Index into the training views (`TrainData::views`).
+    pub view: usize,
+    /// The view's file stem.
+    pub name: String,
+    /// The reference image at the training resolution.
+    pub image: RgbImage,
+    /// Masked pixels `[x, y]` at the training resolution.
+    pub pixels: Vec<[u32; 2]>,
+}
+
+fn spec_error(pair: &str, reason: String) -> InpaintError {
+    InpaintError::Spec {
+        field: format!("--reference {pair}"),
+        reason,
+    }
+}
+
+/// Whether `name` (a file name or stem) names the view `stem`.
+fn names_view(name: &str, stem: &str) -> bool {
+    name == stem || Path::new(name).file_stem().is_some_and(|s| s == stem)
+}
+
+/// Loads the references of `pairs` (`VIEW=IMAGE` strings) for the training views of `scene`
+/// at `1 / downscale` resolution (module docs for the errors).
+pub fn load_references(
+    scene: &Scene,
+    pairs: &[String],
+    downscale: usize,
+) -> Result<Vec<ReferenceView>, InpaintError> {
+    let train: Vec<_> = scene.split(Split::Train).collect();
+    let mut out: Vec<ReferenceView> = Vec::new();
+    for raw in pairs {
+        let pair = ReferencePair::parse(raw).map_err(|reason| InpaintError::Spec {
+            field: "--reference".into(),
+            reason,
+        })?;
+        let Some((index, view)) = train
+            .iter()
+            .enumerate()
+            .find(|(_, v)| names_view(&pair.view, &v.name))
+        else {
+            let known: Vec<&str> = train.iter().map(|v| v.name.as_str()).take(8).collect();
+            return Err(spec_error(
+                raw,
+                format!(
+                    "'{}' is not a training view of scene '{}' (its training views: {}{})",
+                    pair.view,
+                    scene.name,
+                    known.join(", "),
+                    if train.len() > known.len() {
+                        ", ..."
+                    } else {
+                        ""
+                    }
+                ),
+            ));
+        };
+        if out.iter().any(|r| r.view == index) {
+            return Err(spec_error(
+                raw,
+                format!("view '{}' has a reference already", view.name),
+            ));
+        }
+        let Some(mask) = view.mask.as_ref().filter(|m| m.data.iter().any(|b| *b)) else {
+            return Err(spec_error(
+                raw,
+                format!(
+                    "view '{}' has no mask, so there is nothing for a reference to fill",
+                    view.name
+                ),
+            ));
+        };
+        let image = gb_core::read_rgb(&pair.image, Some(scene.background)).map_err(|e| {
+            spec_error(
+                raw,
+                format!("{}: cannot read the image: {e}", pair.image.display()),
+            )
+        })?;
+        if (image.width, image.height) != (view.image.width, view.image.height) {
+            return Err(spec_error(
+                raw,
+                format!(
+                    "{}: the image is {}x{}, the view '{}' is {}x{}",
+                    pair.image.display(),
+                    image.width,
+                    image.height,
+                    view.name,
+                    view.image.width,
+                    view.image.height
+                ),
+            ));
+        }
+        let f = downscale.max(1);
+        let small_mask = gb_nerf::train::data::prepare_view(view, f).mask;
+        let small = downscale_image(&image, f);
+        let mask = small_mask.unwrap_or_else(|| mask.clone());
+        let pixels: Vec<[u32; 2]> = (0..mask.height)
+            .flat_map(|y| (0..mask.width).map(move |x| (x, y)))
+            .filter(|&(x, y)| mask.data[y * mask.width + x])
+            .map(|(x, y)| [x as u32, y as u32])
+            .collect();
+        out.push(ReferenceView {
+            view: index,
+            name: view.name.clone(),
+            image: small,
+            pixels,
+        });
+    }
+    Ok(out)
+}
+
+/// The references of a run and what was carried from them.
+#[derive(Debug, Clone)]
+pub struct ReferenceState {
+    /// The settings.
+    pub config: ReferenceConfig,
+    /// The references.
+    pub views: Vec<ReferenceView>,
+    /// The carried pixels (recomputed as they age; restored on resume).
+    pub carried: Option<CarriedSet>,
+    /// First step of the carrying in this run.
+    pub carry_start: usize,
+}
+
+/// One step's reference term.
+pub struct ReferenceTerm {
+    /// `weight * MSE`, with its graph to the field.
+    pub loss: Tensor<1>,
+    /// Rays through reference pixels.
+    pub direct_rays: usize,
+    /// Rays through carried pixels.
+    pub carried_rays: usize,
+}
+
+impl ReferenceState {
+    /// Training view indices with a reference.
+    pub fn view_indices(&self) -> Vec<usize> {
+        self.views.iter().map(|r| r.view).collect()
+    }
+
+    /// Recomputes the carried pixels when they are due (module docs); errors when a rendered
+    /// depth cannot be read back.
+    pub fn refresh(
+        &mut self,
+        ctx: &RenderContext<'_>,
+        views: &[TrainView],
+        step: usize,
+    ) -> Result<(), InpaintError> {
+        if !self.config.carry || step < self.carry_start {
+            return Ok(());
+        }
+        let due = self
+            .carried
+            .as_ref()
+            .is_none_or(|c| step >= c.step + self.config.refresh_every);
+        if due {
+            let set = carry::carry(ctx, views, &self.views, &self.config, step)
+                .map_err(gb_nerf::train::NerfError::from)?;
+            tracing::debug!(step, pixels = set.pixels.len(), "reference carried");
+            self.carried = Some(set);
+        }
+        Ok(())
+    }
+
+    /// The reference term of `step` (module docs), drawn from a stream seeded by `seed`.
+    pub fn loss(
+        &self,
+        ctx: &RenderContext<'_>,
+        views: &[TrainView],
+        seed: u64,
+    ) -> Option<ReferenceTerm> {
+        let direct: usize = self.views.iter().map(|r| r.pixels.len()).sum();
+        let carried = self.carried.as_ref().map_or(0, |c| c.pixels.len());
+        if direct + carried == 0 || self.config.weight == 0.0 {
+            return None;
+        }
+        let n = self.config.rays;
+        let n_carried = if carried == 0 {
+            0
+        } else if direct == 0 {
+            n
+        } else {
+            ((n as f32 * self.config.carry_share).round() as usize).min(n)
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut rays = RayBatch::default();
+        let mut target = Vec::with_capacity(n * 3);
+        for k in 0..n {
+            let (view, x, y, rgb) = if k < n_carried {
+                let c = &self.carried.as_ref()?.pixels[rng.random_range(0..carried)];
+                (c.view as usize, c.x, c.y, c.rgb)
+            } else {
+                let mut i = rng.random_range(0..direct);
+                let r = self.views.iter().find(|r| {
+                    if i < r.pixels.len() {
+                        true
+                    } else {
+                        i -= r.pixels.len();
+                        false
+                    }
+                })?;
+                let [x, y] = r.pixels[i];
+                (r.view, x, y, r.image.get(x as usize, y as usize))
+            };
+            let cam = &views.get(view)?.camera;
+            let px = [x as f32 + 0.5, y as f32 + 0.5];
+            let r = camera_rays(cam, &[px], ctx.space, ctx.near, ctx.far);
+            rays.origins.extend(r.origins);
+            rays.dirs.extend(r.dirs);
+            rays.near.extend(r.near);
+            rays.far.extend(r.far);
+            target.extend_from_slice(&rgb);
+        }
+        let device = ctx.field.device();
+        let (out, _) = render_rays(
+            ctx.field,
+            ctx.space,
+            &rays,
+            ctx.samples_per_ray,
+            ctx.occupancy,
+            ctx.background,
+            Some(&mut rng),
+        );
+        let target = Tensor::<2>::from_data(TensorData::new(target, [n, 3]), &device);
+        let diff = out.rgb - target;
+        let loss = (diff.clone() * diff).mean().mul_scalar(self.config.weight);
+        Some(ReferenceTerm {
+            loss,
+            direct_rays: n - n_carried,
+            carried_rays: n_carried,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pairs_parse_at_the_first_equals_sign_and_bad_ones_name_the_flag() {
+        let p = ReferencePair::parse("view_010.png=fills/a=b.png").unwrap();
+        assert_eq!(p.view, "view_010.png");
+        assert_eq!(p.image, PathBuf::from("fills/a=b.png"));
+        for bad in ["view_010.png", "=x.png", "view_010="] {
+            let e = ReferencePair::parse(bad).unwrap_err();
+            assert!(e.starts_with(&format!("--reference {bad}:")), "{e}");
+        }
+        assert!(names_view("view_010.png", "view_010"));
+        assert!(names_view("view_010", "view_010"));
+        assert!(!names_view("view_01", "view_010"));
+    }
+
+    #[test]
+    fn the_default_table_is_off_and_each_bad_field_is_named() {
+        let d = ReferenceConfig::default();
+        assert!(d.is_default() && !d.enabled() && d.check().is_none());
+        let bad = |c: ReferenceConfig, field: &str| {
+            let msg = c.check().expect("an error");
+            assert!(msg.contains(field), "{msg} should name {field}");
+        };
+        bad(
+            ReferenceConfig {
+                weight: -1.0,
+                ..d.clone()
+            },
+            "reference.weight",
+        );
+        bad(
+            ReferenceConfig {
+                rays: 0,
+                ..d.clone()
+            },
+            "reference.rays",
+        );
+        bad(
+            ReferenceConfig {
+                carry_share: 1.5,
+                ..d.clone()
+            },
+            "reference.carry_share",
+        );
+        bad(
+            ReferenceConfig {
+                refresh_every: 0,
+                ..d.clone()
+            },
+            "reference.refresh_every",
+        );
+        bad(
+            ReferenceConfig {
+                images: vec!["nothing".into()],
+                ..d
+            },
+            "--reference nothing",
+        );
+    }
+}
