@@ -123,9 +123,9 @@ fn masked_mse(render: &RgbImage, clean: &RgbImage, r: &ReferenceView) -> f64 {
 }
 
 /// 80 steps with the reference of one view from `clean/` against 80 without: inside that
-/// view's mask the render is much closer to the clean image; the carrying starts at step 40
-/// and reaches pixels of other views; the log records the term; and a run resumed from the
-/// checkpoint of step 50 continues with the same losses, bit for bit.
+/// view's mask the render is much closer to the clean image; the term starts at step 40 with
+/// its depth anchors and reaches pixels of other views; the log records it; and a run
+/// resumed from the checkpoint of step 60 continues with the same losses, bit for bit.
 #[test]
 fn a_reference_pulls_its_view_to_the_clean_image_and_a_resumed_run_continues_exactly() {
     let dir = tempfile::tempdir().unwrap();
@@ -146,28 +146,35 @@ fn a_reference_pulls_its_view_to_the_clean_image_and_a_resumed_run_continues_exa
         let p = plain.train_step().unwrap();
         assert!(p.reference.is_none());
         let r = with.train_step().unwrap();
-        let term = r.reference.expect("a reference term every step");
+        if r.step < 40 {
+            assert!(r.reference.is_none(), "the term starts at step 40");
+            continue;
+        }
+        let term = r
+            .reference
+            .expect("a reference term every step from step 40");
         assert_eq!(term.direct_rays + term.carried_rays, 256);
         assert!(term.loss.unwrap().is_finite());
-        if r.step < 40 {
-            assert_eq!((term.carried_rays, term.carried_pixels), (0, 0));
-        } else {
-            assert!(
-                term.carried_pixels > 0,
-                "nothing carried at step {}",
-                r.step
-            );
-            assert_eq!(term.carried_rays, 128);
-        }
+        assert!(
+            term.carried_pixels > 0,
+            "nothing carried at step {}",
+            r.step
+        );
+        assert_eq!(term.carried_rays, 128);
     }
     let ref_index = refs[0].view;
     let carried = with.reference.as_ref().unwrap().carried.clone().unwrap();
     assert!(carried.pixels.iter().all(|p| p.view as usize != ref_index));
     assert_eq!(carried.step, 40);
+    // the depth anchors: one per masked pixel of the reference view, rendered at step 40
+    assert_eq!(carried.anchors.len(), 1);
+    assert_eq!(carried.anchors[0].len(), refs[0].pixels.len());
+    assert!(carried.anchors[0].iter().all(|d| d.is_finite() && *d > 0.0));
+    assert!(carried.pixels.iter().all(|p| p.depth > 0.0));
 
     // the resume: the guided trainer's own checkpoint (its state holds the carried pixels)
     let state_ckpt = dir.path().join("guided.bin");
-    let mut opts = gb_inpaint::FitOptions {
+    let opts = gb_inpaint::FitOptions {
         checkpoint: Some(state_ckpt.clone()),
         ..Default::default()
     };
@@ -191,7 +198,6 @@ fn a_reference_pulls_its_view_to_the_clean_image_and_a_resumed_run_continues_exa
         resumed.reference.as_ref().unwrap().carried,
         with.reference.as_ref().unwrap().carried
     );
-    opts.checkpoint = None;
     with.nerf.config.train.steps = 80;
     for _ in 60..80 {
         let a = with.train_step().unwrap();
@@ -321,10 +327,14 @@ fn a_run_with_a_reference_records_it_and_export_none_writes_no_export() {
     assert!(!metrics.contains("\"export\""), "{metrics}");
     let log = std::fs::read_to_string(out.join("train_log.jsonl")).unwrap();
     assert_eq!(log.lines().count(), 3);
-    for line in log.lines() {
+    for (i, line) in log.lines().enumerate() {
         let v: serde_json::Value = serde_json::from_str(line).unwrap();
-        // 3 steps: the carrying starts at step 0 (2000 of 10000 reference steps, scaled)
         let r = &v["reference"];
+        // 3 steps: the term starts at step 1 (5000 of 10000 reference steps, scaled)
+        if i == 0 {
+            assert!(r.is_null(), "{v}");
+            continue;
+        }
         assert_eq!(r["direct_rays"], 128, "{v}");
         assert_eq!(r["carried_rays"], 128, "{v}");
         assert!(r["loss"].as_f64().unwrap() > 0.0, "{v}");

@@ -281,8 +281,10 @@ mod tests {
                     x: 2,
                     y: 4,
                     rgb: [0.1, 0.2, 0.7],
+                    depth: 2.5,
                 }],
                 tested: 9,
+                anchors: vec![vec![1.5, 3.25]],
             }),
         };
         let back: GuidedState =

@@ -349,9 +349,9 @@ fn same_seed_gives_identical_bytes_and_another_seed_differs() {
     let (fa, fb, fc) = (files(a.path()), files(b.path()), files(c.path()));
     assert_eq!(
         fa.len(),
-        2 + 1 + 3 + 8 * 4,
+        2 + 1 + 3 + 8 * 4 + 5,
         "poses, scene.json, README, the COLMAP model (3 files) + per view image, mask, depth, \
-         normal"
+         normal + the clean/ image of each of the 5 training views"
     );
     assert!(fa == fb, "same seed, different files");
     let names: Vec<&String> = fa.iter().map(|f| &f.0).collect();

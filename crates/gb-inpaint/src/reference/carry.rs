@@ -22,6 +22,10 @@ pub struct CarriedPixel {
     pub y: u32,
     /// Target colour.
     pub rgb: [f32; 3],
+    /// The z-depth the field rendered through the pixel when it was carried: the depth
+    /// anchor of its ray (0: none).
+    #[serde(default)]
+    pub depth: f32,
 }
 
 /// The carried pixels of one refresh.
@@ -33,6 +37,11 @@ pub struct CarriedSet {
     pub pixels: Vec<CarriedPixel>,
     /// Masked pixels tested (reached or not).
     pub tested: usize,
+    /// Per reference view, the z-depth the field rendered through each of its masked pixels
+    /// when the reference term started: the depth anchors of the direct rays (kept from the
+    /// first refresh on).
+    #[serde(default)]
+    pub anchors: Vec<Vec<f32>>,
 }
 
 /// Masked pixels of `view` on a stride grid of at most `max` pixels (row-major).
@@ -78,23 +87,38 @@ fn reference_depth(
 }
 
 /// The pixels of every training view but the references' that a reference reaches through
-/// the field of `ctx` at `step` (module docs of [`crate::reference`]). Errors when a rendered
-/// depth does not hold `f32` values.
+/// the field of `ctx` at `step` (module docs of [`crate::reference`]; none when
+/// `cfg.carry` is off), with the direct rays' depth anchors: `anchors` when given (those of
+/// the first refresh), else the depths rendered now. Errors when a rendered depth does not
+/// hold `f32` values.
 pub fn carry(
     ctx: &RenderContext<'_>,
     views: &[TrainView],
     refs: &[ReferenceView],
     cfg: &ReferenceConfig,
     step: usize,
+    anchors: Option<Vec<Vec<f32>>>,
 ) -> Result<CarriedSet, TensorValuesError> {
     let field = ctx.field.valid();
     let ref_depths: Vec<Vec<f32>> = refs
         .iter()
         .map(|r| reference_depth(ctx, &field, views, r))
         .collect::<Result<_, _>>()?;
+    let anchors = anchors.unwrap_or_else(|| {
+        refs.iter()
+            .zip(&ref_depths)
+            .map(|(r, map)| {
+                let w = views[r.view].camera.width;
+                r.pixels
+                    .iter()
+                    .map(|[x, y]| map[*y as usize * w + *x as usize])
+                    .collect()
+            })
+            .collect()
+    });
     let mut tested = Vec::new();
     for (j, view) in views.iter().enumerate() {
-        if refs.iter().any(|r| r.view == j) {
+        if !cfg.carry || refs.iter().any(|r| r.view == j) {
             continue;
         }
         let grid = masked_on_grid(view, cfg.max_pixels_per_view);
@@ -113,14 +137,9 @@ pub fn carry(
             depth,
         });
     }
-    Ok(carry_from_depths(
-        views,
-        refs,
-        &ref_depths,
-        &tested,
-        cfg.depth_tolerance,
-        step,
-    ))
+    let mut set = carry_from_depths(views, refs, &ref_depths, &tested, cfg.depth_tolerance, step);
+    set.anchors = anchors;
+    Ok(set)
 }
 
 /// The masked pixels of one view that the carrying tests, with the z-depth rendered
@@ -188,6 +207,7 @@ pub fn carry_from_depths(
                     x: *x,
                     y: *y,
                     rgb,
+                    depth: *d,
                 });
             }
         }
@@ -196,6 +216,7 @@ pub fn carry_from_depths(
         step,
         pixels,
         tested: count,
+        anchors: Vec::new(),
     }
 }
 

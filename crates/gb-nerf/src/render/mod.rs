@@ -66,10 +66,36 @@ pub fn render_samples(
     samples: &SampleSet,
     background: Background,
 ) -> VolumeOutput {
+    render_samples_with(field, samples, background, false)
+}
+
+/// [`render_samples`] with the density detached from the graph: a loss on the colour moves
+/// the field's colour, and its geometry only through the features the two share. For a
+/// target that knows a surface's colour but not where the surface is (a reference view,
+/// `gb_inpaint::reference`).
+pub fn render_samples_fixed_geometry(
+    field: &NerfField,
+    samples: &SampleSet,
+    background: Background,
+) -> VolumeOutput {
+    render_samples_with(field, samples, background, true)
+}
+
+fn render_samples_with(
+    field: &NerfField,
+    samples: &SampleSet,
+    background: Background,
+    detach_density: bool,
+) -> VolumeOutput {
     let device = field.device();
     let (r, s) = (samples.rays, samples.samples);
     let (sigma, rgb) = forward_chunked(field, &samples.points, &samples.view_dirs);
     let sigma = expand_dense(sigma, samples).reshape([r, s]);
+    let sigma = if detach_density {
+        sigma.detach()
+    } else {
+        sigma
+    };
     let rgb = expand_dense(rgb, samples).reshape([r, s, 3]);
     let t = Tensor::<2>::from_data(TensorData::new(samples.t.clone(), [r, s]), &device);
     let delta = Tensor::<2>::from_data(TensorData::new(samples.delta.clone(), [r, s]), &device);
