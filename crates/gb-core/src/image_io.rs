@@ -38,6 +38,27 @@ impl RgbImage {
         let i = (y * self.width + x) * 3;
         self.data[i..i + 3].copy_from_slice(&rgb);
     }
+
+    /// The bilinear sample at continuous pixel coordinates (pixel centres at `+0.5`),
+    /// clamped at the border.
+    pub fn bilinear(&self, x: f32, y: f32) -> [f32; 3] {
+        let x = (x - 0.5).clamp(0.0, (self.width - 1) as f32);
+        let y = (y - 0.5).clamp(0.0, (self.height - 1) as f32);
+        let (xa, ya) = (x.floor() as usize, y.floor() as usize);
+        let (xb, yb) = ((xa + 1).min(self.width - 1), (ya + 1).min(self.height - 1));
+        let (fx, fy) = (x - xa as f32, y - ya as f32);
+        let (a, b, c, d) = (
+            self.get(xa, ya),
+            self.get(xb, ya),
+            self.get(xa, yb),
+            self.get(xb, yb),
+        );
+        [0, 1, 2].map(|ch| {
+            let top = a[ch] * (1.0 - fx) + b[ch] * fx;
+            let bottom = c[ch] * (1.0 - fx) + d[ch] * fx;
+            top * (1.0 - fy) + bottom * fy
+        })
+    }
 }
 
 /// An image file could not be read or written.
@@ -151,6 +172,17 @@ fn encode_png(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn bilinear_interpolates_between_pixel_centres_and_clamps_at_the_border() {
+        let mut img = RgbImage::filled(2, 1, [0.0; 3]);
+        img.set(1, 0, [1.0, 0.5, 0.0]);
+        assert_eq!(img.bilinear(0.5, 0.5), [0.0; 3]);
+        assert_eq!(img.bilinear(1.5, 0.5), [1.0, 0.5, 0.0]);
+        assert_eq!(img.bilinear(1.0, 0.5), [0.5, 0.25, 0.0]);
+        assert_eq!(img.bilinear(-3.0, 9.0), [0.0; 3]);
+        assert_eq!(img.bilinear(7.0, 0.5), [1.0, 0.5, 0.0]);
+    }
+
     use super::*;
 
     #[test]

@@ -147,26 +147,10 @@ pub fn crop_image(
     device: &Device,
 ) -> Tensor<4> {
     let mut chw = vec![0.0f32; 3 * r * r];
-    let (w, h) = (image.width as f32, image.height as f32);
     for (k, [px, py]) in crop_positions(bbox, r).into_iter().enumerate() {
-        let x = (px - 0.5).clamp(0.0, w - 1.0);
-        let y = (py - 0.5).clamp(0.0, h - 1.0);
-        let (xa, ya) = (x.floor() as usize, y.floor() as usize);
-        let (xb, yb) = (
-            (xa + 1).min(image.width - 1),
-            (ya + 1).min(image.height - 1),
-        );
-        let (fx, fy) = (x - xa as f32, y - ya as f32);
-        let (a, b, c, d) = (
-            image.get(xa, ya),
-            image.get(xb, ya),
-            image.get(xa, yb),
-            image.get(xb, yb),
-        );
+        let v = image.bilinear(px, py);
         for ch in 0..3 {
-            let top = a[ch] * (1.0 - fx) + b[ch] * fx;
-            let bottom = c[ch] * (1.0 - fx) + d[ch] * fx;
-            chw[ch * r * r + k] = top * (1.0 - fy) + bottom * fy;
+            chw[ch * r * r + k] = v[ch];
         }
     }
     Tensor::from_data(TensorData::new(chw, [1, 3, r, r]), device)

@@ -75,25 +75,6 @@ pub struct Fill {
     pub filled_pixels: usize,
 }
 
-/// Bilinear sample of `img` at continuous pixel coordinates (pixel centres at `+0.5`),
-/// clamped at the border.
-fn bilinear(img: &RgbImage, x: f32, y: f32) -> [f32; 3] {
-    let fx = (x - 0.5).clamp(0.0, (img.width - 1) as f32);
-    let fy = (y - 0.5).clamp(0.0, (img.height - 1) as f32);
-    let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
-    let (x1, y1) = ((x0 + 1).min(img.width - 1), (y0 + 1).min(img.height - 1));
-    let (ax, ay) = (fx - x0 as f32, fy - y0 as f32);
-    let (a, b, c, d) = (
-        img.get(x0, y0),
-        img.get(x1, y0),
-        img.get(x0, y1),
-        img.get(x1, y1),
-    );
-    [0, 1, 2].map(|k| {
-        (a[k] * (1.0 - ax) + b[k] * ax) * (1.0 - ay) + (c[k] * (1.0 - ax) + d[k] * ax) * ay
-    })
-}
-
 fn view_error(view: &str, scene: &Path, reason: String) -> InpaintError {
     InpaintError::Spec {
         field: format!("--view {view} (scene {})", scene.display()),
@@ -165,7 +146,7 @@ pub fn fill_view(
     let positions = crop_pixels(geometry.bbox, r, r);
     let mut rgb = Vec::with_capacity(r * r * 3);
     for [px, py] in &positions {
-        rgb.extend_from_slice(&bilinear(&full.image, *px, *py));
+        rgb.extend_from_slice(&full.image.bilinear(*px, *py));
     }
     let mask: Vec<f32> = geometry
         .mask
@@ -211,7 +192,7 @@ pub fn fill_view(
             if m.data[y * m.width + x] {
                 let u = (x as f32 + 0.5 - x0 as f32) / bw * r as f32;
                 let w = (y as f32 + 0.5 - y0 as f32) / bh * r as f32;
-                image.set(x, y, bilinear(&crop, u, w));
+                image.set(x, y, crop.bilinear(u, w));
                 filled += 1;
             }
         }
@@ -235,20 +216,4 @@ pub fn fill(scene_dir: &Path, view: &str, opts: &FillOptions) -> Result<Fill, In
             source: Box::new(source),
         })?;
     fill_view(&scene, scene_dir, view, opts)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn bilinear_interpolates_between_pixel_centres_and_clamps_at_the_border() {
-        let mut img = RgbImage::filled(2, 1, [0.0; 3]);
-        img.set(1, 0, [1.0, 0.5, 0.0]);
-        assert_eq!(bilinear(&img, 0.5, 0.5), [0.0; 3]);
-        assert_eq!(bilinear(&img, 1.5, 0.5), [1.0, 0.5, 0.0]);
-        assert_eq!(bilinear(&img, 1.0, 0.5), [0.5, 0.25, 0.0]);
-        assert_eq!(bilinear(&img, -3.0, 9.0), [0.0; 3]);
-        assert_eq!(bilinear(&img, 7.0, 0.5), [1.0, 0.5, 0.0]);
-    }
 }
