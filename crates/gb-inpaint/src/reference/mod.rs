@@ -324,9 +324,8 @@ pub fn load_references(
             ));
         }
         let f = downscale.max(1);
-        let small_mask = gb_nerf::train::data::prepare_view(view, f).mask;
         let small = downscale_image(&image, f);
-        let mask = small_mask.unwrap_or_else(|| mask.clone());
+        let mask = gb_nerf::train::data::downscale_mask(mask, f);
         let pixels: Vec<[u32; 2]> = (0..mask.height)
             .flat_map(|y| (0..mask.width).map(move |x| (x, y)))
             .filter(|&(x, y)| mask.data[y * mask.width + x])

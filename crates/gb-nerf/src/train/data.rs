@@ -92,7 +92,8 @@ pub fn downscale_image(img: &RgbImage, f: usize) -> RgbImage {
     out
 }
 
-fn downscale_mask(m: &Mask, f: usize) -> Mask {
+/// Downscales a mask by an integer factor: a pixel is masked when any pixel of its block is.
+pub fn downscale_mask(m: &Mask, f: usize) -> Mask {
     if f <= 1 {
         return m.clone();
     }
