@@ -534,6 +534,50 @@ fn cases() -> Vec<(&'static str, Setup)> {
                 &["typo.toml", "unknown field `lambda_rgbb`", "line 1"],
             )
         }),
+        case("an [oracle] clean folder that does not exist", |c| {
+            let unseen = std::fs::read_to_string(
+                workspace_root().join("configs/methods/gb-nerf-unseen.toml"),
+            )
+            .unwrap();
+            let m = c.path("oracle.toml");
+            let missing = c.path("no-such-clean");
+            std::fs::write(
+                &m,
+                format!("{unseen}\n[oracle]\nclean = \"{}\"\n", path_str(&missing)),
+            )
+            .unwrap();
+            let s = c.scene();
+            run(
+                c.inpaint(&s, &["--method", path_str(&m)]),
+                &["[oracle] clean", "no-such-clean", "not a folder"],
+            )
+        }),
+        case("a [personalize] object_free image of the wrong size", |c| {
+            let unseen = std::fs::read_to_string(
+                workspace_root().join("configs/methods/gb-nerf-unseen.toml"),
+            )
+            .unwrap();
+            let s = c.scene();
+            let clean = c.path("clean");
+            std::fs::create_dir_all(&clean).unwrap();
+            let small = gb_core::RgbImage::filled(3, 2, [0.5; 3]);
+            for view in pngs(&s.join("images_1")) {
+                gb_core::write_rgb_png(&clean.join(view.file_name().unwrap()), &small).unwrap();
+            }
+            let m = c.path("personal.toml");
+            std::fs::write(
+                &m,
+                format!(
+                    "{unseen}\n[personalize]\nsteps = 1\nobject_free = \"{}\"\n",
+                    path_str(&clean)
+                ),
+            )
+            .unwrap();
+            run(
+                c.inpaint(&s, &["--method", path_str(&m)]),
+                &["[personalize] object_free", "the image is 3x2"],
+            )
+        }),
         case("a method TOML with a mistyped field", |c| {
             let none = std::fs::read_to_string(workspace_root().join("configs/methods/none.toml"))
                 .unwrap();
@@ -753,9 +797,12 @@ fn every_bad_input_is_one_clear_error_line_with_exit_code_2() {
     let template = small_stairs(root.path(), 24, 18, 0);
     let cases = cases();
     assert!(cases.len() >= 30, "{} cases", cases.len());
+    // `GB_BAD_INPUT_ONLY=TEXT` runs the cases whose name holds TEXT (while writing one)
+    let only = std::env::var("GB_BAD_INPUT_ONLY").unwrap_or_default();
     let failures: Vec<String> = cases
         .iter()
         .enumerate()
+        .filter(|(_, (name, _))| name.contains(only.as_str()))
         .filter_map(|(i, (name, setup))| check_case(name, *setup, &template, root.path(), i))
         .collect();
     assert!(

@@ -17,10 +17,18 @@
 //! each cell with its sample standard deviation and per-seed values, `vs_none` compares the
 //! means, and `wins_vs_none` counts the seeds on which each method beats that seed's `none`.
 //!
-//! `--oracle` adds the row `reference-oracle`, an upper bound that no real capture has: the
+//! `--oracle reference` adds the row `reference-oracle`, an upper bound that no real capture has: the
 //! `none` method with one reference view ([`gb_inpaint::reference`]) taken from the scene's
 //! `clean/` (the middle masked training view rendered without the object, exact ground
 //! truth). It answers whether the pipeline carries a perfect 2D fill of one view into 3D.
+//! `--oracle prior` adds `prior-oracle`: the default method with its prior personalised on `clean/`,
+//! every training view without the object, so that the prior knows the hidden region
+//! exactly and nothing else supervises it. It answers whether the distillation carries a
+//! strong prior's knowledge into 3D, if personalisation makes the prior strong (with the
+//! tiny prior it does not: README). `--oracle score` adds `score-oracle`: the default
+//! method with its RGB score replaced by the exact score of the object-free images
+//! ([`gb_inpaint::oracle`]), the strongest prior there is; it separates the prior from the
+//! distillation for certain. Bare `--oracle` adds all three.
 //! `--fill-reference` adds `reference-fill`: the same view filled in 2D by the grid's prior
 //! (`cargo xtask fill`, its default settings, the prior's own LoRA) as the reference, which
 //! is what a user without a clean plate or a 2D tool runs.
@@ -57,27 +65,53 @@ pub struct Args {
     /// Output folder of the JSON.
     #[arg(long, default_value = "bench/results")]
     pub out: PathBuf,
-    /// Add the oracle row `reference-oracle` (module docs): labelled as an oracle, never a
-    /// method a user can run on a real capture without a clean plate.
-    #[arg(long)]
-    pub oracle: bool,
+    /// Add oracle rows (module docs), comma-separated: `reference`, `prior`, `score`; bare
+    /// `--oracle` adds all three. Each is labelled as an oracle, never a method a user can
+    /// run on a real capture without clean plates.
+    #[arg(long, value_enum, value_delimiter = ',', num_args = 0.., default_missing_value = "reference,prior,score")]
+    pub oracle: Option<Vec<OracleRow>>,
     /// Add the row `reference-fill` (module docs): the `none` method with a reference that
     /// the grid's prior fills in 2D (`cargo xtask fill`).
     #[arg(long)]
     pub fill_reference: bool,
 }
 
+/// An oracle row of `bench quality --oracle` (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OracleRow {
+    /// `reference-oracle`: one exact reference view.
+    Reference,
+    /// `prior-oracle`: the prior personalised on every exact object-free view.
+    Prior,
+    /// `score-oracle`: the exact RGB score of the object-free views.
+    Score,
+}
+
 /// The extra rows of `bench quality` beside the method grid.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct ExtraRows {
-    /// `reference-oracle` (`--oracle`).
-    pub oracle: bool,
+    /// The oracle rows (`--oracle`).
+    pub oracle: Vec<OracleRow>,
     /// `reference-fill` (`--fill-reference`).
     pub fill: bool,
 }
 
 /// The name of the oracle row of `--oracle`.
 pub const REFERENCE_ORACLE: &str = "reference-oracle";
+
+/// The name of the second oracle row of `--oracle`.
+pub const PRIOR_ORACLE: &str = "prior-oracle";
+
+/// The name of the third oracle row of `--oracle`.
+pub const SCORE_ORACLE: &str = "score-oracle";
+
+/// What `score-oracle` is, in the JSON.
+pub const SCORE_ORACLE_NOTE: &str = "ORACLE, not a method: the default method whose RGB score is \
+    the exact one of each guided view's object-free image (the scene's clean/; SDS with \
+    guidance scale 1, lambda_rgb 1e-4), the normal term unchanged; no direct supervision";
+
+/// AdamW steps of the `prior-oracle` personalisation.
+pub const PRIOR_ORACLE_STEPS: usize = 300;
 
 /// The name of the row of `--fill-reference`.
 pub const REFERENCE_FILL: &str = "reference-fill";
@@ -134,6 +168,60 @@ pub fn write_reference_oracle(
         &view.name,
         &scene_dir.join("clean").join(format!("{}.png", view.name)),
     )
+}
+
+/// Writes `dir/prior-oracle.toml` (module docs): the default method
+/// ([`gb_inpaint::run::DEFAULT_METHOD`]) with its prior personalised
+/// ([`gb_inpaint::personalize`], [`PRIOR_ORACLE_STEPS`] steps) on the scene's `clean/`, every
+/// training view without the object: the prior then knows what the hole holds, and only the
+/// distillation carries it into the NeRF (no reference, no direct supervision).
+pub fn write_prior_oracle(scene_dir: &Path, dir: &Path) -> anyhow::Result<PathBuf> {
+    let mut method = gb_inpaint::MethodConfig::load(gb_inpaint::run::DEFAULT_METHOD)?;
+    method.name = PRIOR_ORACLE.into();
+    method.description = format!(
+        "ORACLE, not a method: {} with its prior personalised on every training view without \
+         the object (exact ground truth from the scene's clean/)",
+        gb_inpaint::run::DEFAULT_METHOD
+    );
+    method.personalize.steps = PRIOR_ORACLE_STEPS;
+    method.personalize.object_free = Some(std::path::absolute(scene_dir.join("clean"))?);
+    write_method(dir, &method)
+}
+
+/// Writes `dir/score-oracle.toml` (module docs, [`SCORE_ORACLE_NOTE`]): the default method
+/// with its RGB score replaced by the exact score of the object-free images
+/// ([`gb_inpaint::oracle`]): SDS at guidance scale 1, so that the direction is exactly the
+/// pull of the crop's latents to the truth's, at `lambda_rgb = 1e-4` (ten times the
+/// default's: the exact direction has no noise in it and is smaller than BSD's; the one
+/// weight tried, on tuning seed 100).
+pub fn write_score_oracle(scene_dir: &Path, dir: &Path) -> anyhow::Result<PathBuf> {
+    use gb_diffusion::distill::{Branch, GuidanceMethod};
+    let mut method = gb_inpaint::MethodConfig::load(gb_inpaint::run::DEFAULT_METHOD)?;
+    method.name = SCORE_ORACLE.into();
+    method.description = SCORE_ORACLE_NOTE.into();
+    method.lambda_rgb = 1e-4;
+    let rgb = method
+        .rgb
+        .as_mut()
+        .ok_or_else(|| anyhow::anyhow!("the default method has no RGB guidance"))?;
+    rgb.guidance = GuidanceMethod::Sds {
+        guidance_scale: 1.0,
+    };
+    method.oracle = gb_inpaint::oracle::OracleSettings {
+        clean: Some(std::path::absolute(scene_dir.join("clean"))?),
+        branches: vec![Branch::Text, Branch::Unconditional],
+    };
+    write_method(dir, &method)
+}
+
+/// Writes `dir/NAME.toml` for `method`, headed by its description. Returns its path.
+fn write_method(dir: &Path, method: &gb_inpaint::MethodConfig) -> anyhow::Result<PathBuf> {
+    let text = format!("# {}\n{}", method.description, toml::to_string(method)?);
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let path = dir.join(format!("{}.toml", method.name));
+    gb_core::write_atomic(&path, text.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
 }
 
 /// Writes `dir/reference-fill.toml` (module docs): the `none` method with the middle masked
@@ -295,7 +383,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &args.work,
             args.reuse_finished,
             ExtraRows {
-                oracle: args.oracle,
+                oracle: args.oracle.clone().unwrap_or_default(),
                 fill: args.fill_reference,
             },
         )?;
@@ -356,8 +444,12 @@ pub fn run_scene(
             .with_context(|| format!("generating {name} into {}", scene_dir.display()))?;
         let mut methods = grid.methods.clone();
         let mut extra_files = Vec::new();
-        if extra.oracle {
-            extra_files.push(write_reference_oracle(&generated, &scene_dir, &runs)?);
+        for row in &extra.oracle {
+            extra_files.push(match row {
+                OracleRow::Reference => write_reference_oracle(&generated, &scene_dir, &runs)?,
+                OracleRow::Prior => write_prior_oracle(&scene_dir, &runs)?,
+                OracleRow::Score => write_score_oracle(&scene_dir, &runs)?,
+            });
         }
         if extra.fill {
             let prior = grid.prior.clone().unwrap_or_else(|| "tiny".into());
@@ -431,11 +523,24 @@ pub fn run_scene(
         "preset": grid.preset,
         "prior": grid.prior.clone().unwrap_or_else(|| "tiny".into()),
         "device": grid.device.unwrap_or_default().name(),
-        "oracle_rows": if extra.oracle {
-            json!({REFERENCE_ORACLE: "ORACLE, not a method: the none method with one training view's \
-                exact object-free image (the scene's clean/) as its reference view"})
-        } else {
+        "oracle_rows": if extra.oracle.is_empty() {
             Value::Null
+        } else {
+            extra
+                .oracle
+                .iter()
+                .map(|row| match row {
+                    OracleRow::Reference => (REFERENCE_ORACLE.to_string(), json!(
+                        "ORACLE, not a method: the none method with one training view's exact \
+                         object-free image (the scene's clean/) as its reference view")),
+                    OracleRow::Prior => (PRIOR_ORACLE.to_string(), json!(format!(
+                        "ORACLE, not a method: the default method with its prior personalised \
+                         ({PRIOR_ORACLE_STEPS} steps) on every training view's exact object-free \
+                         image (the scene's clean/); no direct supervision"))),
+                    OracleRow::Score => (SCORE_ORACLE.to_string(), json!(SCORE_ORACLE_NOTE)),
+                })
+                .collect::<serde_json::Map<_, _>>()
+                .into()
         },
         "training_seeds": seeds,
         "wall_seconds": started.elapsed().as_secs_f64(),
@@ -453,6 +558,43 @@ pub fn run_scene(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_oracle_rows_are_the_default_method_with_the_scenes_clean_views() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = dir.path().join("scene");
+        let prior = gb_inpaint::MethodConfig::load(
+            write_prior_oracle(&scene, dir.path())
+                .unwrap()
+                .to_str()
+                .unwrap(),
+        )
+        .unwrap();
+        assert_eq!(prior.name, PRIOR_ORACLE);
+        assert_eq!(prior.personalize.steps, PRIOR_ORACLE_STEPS);
+        assert!(prior
+            .personalize
+            .object_free
+            .unwrap()
+            .ends_with("scene/clean"));
+        assert!(prior.oracle.clean.is_none());
+        let score = gb_inpaint::MethodConfig::load(
+            write_score_oracle(&scene, dir.path())
+                .unwrap()
+                .to_str()
+                .unwrap(),
+        )
+        .unwrap();
+        let default = gb_inpaint::MethodConfig::load(gb_inpaint::run::DEFAULT_METHOD).unwrap();
+        assert_eq!(score.name, SCORE_ORACLE);
+        assert!(score.oracle.clean.unwrap().ends_with("scene/clean"));
+        assert_eq!(score.lambda_rgb, 1e-4);
+        assert_eq!(
+            (score.lambda_normal, &score.normal, &score.visibility),
+            (default.lambda_normal, &default.normal, &default.visibility)
+        );
+        assert_eq!(score.rgb.unwrap().guidance.name(), "sds");
+    }
 
     #[test]
     fn vs_none_compares_each_column_in_its_direction() {

@@ -2,7 +2,7 @@
 //! ([`backend`]), crash-safe file writes ([`atomic`]), PNG/JPEG image IO ([`image_io`]),
 //! progress bars that do not fight the log ([`progress`]), one-line error messages
 //! ([`messages`]), the prior's float precision ([`precision`]), row lookups with a parallel
-//! backward ([`indexing`]) and, with the `clap` feature, the command lines' value parsers
+//! backward ([`indexing`]), content fingerprints for caches ([`fingerprint`]) and, with the `clap` feature, the command lines' value parsers
 //! (`cli`).
 
 pub mod assets;
@@ -10,6 +10,7 @@ pub mod atomic;
 pub mod backend;
 #[cfg(feature = "clap")]
 pub mod cli;
+pub mod fingerprint;
 pub mod image_io;
 pub mod indexing;
 pub mod messages;

@@ -7,7 +7,8 @@
 
 use burn::tensor::Tensor;
 use gb_diffusion::distill::{
-    DistillSettings, LatentTarget, PromptEmbeddings, ScoreDistiller, StepDiagnostics,
+    Branch, DistillSettings, InpaintEpsPredictor, LatentTarget, OracleEps, PromptEmbeddings,
+    ScoreDistiller, StepDiagnostics,
 };
 use serde::Serialize;
 
@@ -43,6 +44,9 @@ pub struct TermConditioning<'a> {
     pub masked_image_latents: &'a Tensor<4>,
     /// Text embeddings of the term's prompts.
     pub prompts: &'a PromptEmbeddings,
+    /// Oracle guidance ([`crate::oracle`]): the true latents `[1, C, h, w]` and the branches
+    /// they answer instead of the U-Net.
+    pub oracle: Option<(Tensor<4>, &'a [Branch])>,
 }
 
 /// The result of one term.
@@ -93,11 +97,21 @@ pub fn guidance_term(
         masked_image_latents: cond.masked_image_latents.clone(),
         prompts: cond.prompts,
     };
+    let branches = distiller.guidance().branches();
+    let oracle = cond.oracle.as_ref().map(|(clean, answered)| OracleEps {
+        inner: prior.unet.as_ref(),
+        clean: clean.clone(),
+        alphas: &prior.alphas,
+        branches,
+        oracle_branches: answered,
+    });
+    let unet: &dyn InpaintEpsPredictor = match &oracle {
+        Some(o) => o,
+        None => prior.unet.as_ref(),
+    };
     let out = match at {
-        Some((timestep, noise)) => {
-            distiller.step_with(prior.unet.as_ref(), target, timestep, noise)?
-        }
-        None => distiller.step(prior.unet.as_ref(), target)?,
+        Some((timestep, noise)) => distiller.step_with(unet, target, timestep, noise)?,
+        None => distiller.step(unet, target)?,
     };
     let chain = if reference_chain_rule {
         out.diagnostics.alpha_bar.sqrt()

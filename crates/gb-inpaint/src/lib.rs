@@ -21,6 +21,7 @@
 //! - [`pre_inpainted`]: the SPIn-NeRF + LaMa baseline's inputs;
 //! - [`report`], [`svg`], [`gif`]: the run's `report.html`, its SVG charts (a small writer of
 //!   our own rather than a plotting crate, see [`svg`]) and the orbit animation;
+//! - [`oracle`]: oracle guidance for experiments (the exact score of the object-free image);
 //! - [`visibility`]: visibility-aware guidance (the prior acts only where no training view
 //!   sees the surface);
 //! - [`run`]: one object-removal run as a library call ([`run::run`] on a [`RunSpec`],
@@ -42,6 +43,7 @@ pub mod gif;
 pub mod grid;
 pub mod guidance;
 pub mod method;
+pub mod oracle;
 pub mod personalize;
 pub mod pre_inpainted;
 pub mod prior;

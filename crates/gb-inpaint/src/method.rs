@@ -295,6 +295,14 @@ pub struct MethodConfig {
         skip_serializing_if = "crate::reference::ReferenceConfig::is_default"
     )]
     pub reference: crate::reference::ReferenceConfig,
+    /// Oracle guidance for experiments: the RGB term's prompt branch answered by the exact
+    /// score of the object-free image (off by default; see [`crate::oracle`]). Left out of
+    /// the written config while it is the default.
+    #[serde(
+        default,
+        skip_serializing_if = "crate::oracle::OracleSettings::is_default"
+    )]
+    pub oracle: crate::oracle::OracleSettings,
 }
 
 fn default_lambda() -> f64 {
@@ -397,6 +405,21 @@ impl MethodConfig {
         }
         if let Some(msg) = self.visibility.check() {
             return Err(msg.into());
+        }
+        if self.oracle.clean.is_some() {
+            let branches = self
+                .rgb
+                .as_ref()
+                .and_then(|r| r.guidance.build().ok())
+                .map(|g| g.branches().to_vec())
+                .unwrap_or_default();
+            if !self.oracle.branches.iter().any(|b| branches.contains(b)) {
+                return Err(format!(
+                    "[oracle] answers {:?}, but the RGB guidance evaluates {:?}: the oracle \
+                     would change nothing",
+                    self.oracle.branches, branches
+                ));
+            }
         }
         if let Some(msg) = self.reference.check() {
             return Err(msg);
@@ -579,6 +602,26 @@ mod tests {
     }
 
     #[test]
+    fn an_oracle_must_answer_a_branch_the_rgb_guidance_evaluates() {
+        let mut m = MethodConfig::builtin("gb-nerf-unseen").unwrap();
+        m.oracle.clean = Some("clean".into());
+        let text = toml::to_string(&m).unwrap();
+        assert!(text.contains("[oracle]"), "{text}");
+        let back = MethodConfig::from_toml(&text, Path::new("o.toml")).unwrap();
+        assert_eq!(
+            back.oracle.branches,
+            vec![gb_diffusion::distill::Branch::Text]
+        );
+        // BSD evaluates the prompt and the negative, never the unconditional branch
+        m.oracle.branches = vec![gb_diffusion::distill::Branch::Unconditional];
+        let text = toml::to_string(&m).unwrap();
+        let err = MethodConfig::from_toml(&text, Path::new("o.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("[oracle]") && err.contains("o.toml"), "{err}");
+    }
+
+    #[test]
     fn method_round_trips_through_toml() {
         for (name, _) in BUILTIN_METHODS {
             let m = MethodConfig::builtin(name).unwrap();
@@ -588,6 +631,7 @@ mod tests {
             // without personalisation the written method is what it was before the setting
             // existed, so older configs and checkpoints still match
             assert!(!text.contains("personalize"), "{text}");
+            assert!(!text.contains("oracle"), "{text}");
         }
         let mut m = MethodConfig::builtin("gb-nerf-unseen").unwrap();
         m.personalize.steps = 50;

@@ -236,6 +236,8 @@ pub struct GuidedTrainer {
     pub reference: Option<ReferenceState>,
     /// Carried pixels restored from a checkpoint, handed to the references when they are set.
     restored_carry: Option<CarriedSet>,
+    /// Oracle guidance ([`Self::set_oracle`]; `None`: the prior answers).
+    oracle: Option<crate::oracle::OracleTargets>,
     /// Counters of the whole run (restored on resume).
     pub totals: RunTotals,
     /// The run's identity ([`resume::identity`]), stored in checkpoints.
@@ -522,6 +524,7 @@ impl GuidedTrainer {
             guidance,
             reference: None,
             restored_carry: None,
+            oracle: None,
             totals: RunTotals::default(),
             identity,
             nan_streak: 0,
@@ -530,6 +533,12 @@ impl GuidedTrainer {
                 .ok()
                 .and_then(|v| v.parse().ok()),
         })
+    }
+
+    /// Attaches oracle guidance ([`crate::oracle`]): the RGB term's chosen branches are
+    /// answered by the exact score of each guided view's object-free image.
+    pub fn set_oracle(&mut self, targets: crate::oracle::OracleTargets) {
+        self.oracle = Some(targets);
     }
 
     /// Attaches the run's reference views ([`crate::reference`], settings from the method's
@@ -843,10 +852,17 @@ impl GuidedTrainer {
                 (vg.mask_latent.clone(), latents)
             }
         };
+        let oracle = match (modality, self.oracle.as_mut()) {
+            (Modality::Rgb, Some(o)) => o
+                .latents(view, &vg.geometry, g.prior.resolution, encoder, &g.device)?
+                .map(|z| (z, o.branches.as_slice())),
+            _ => None,
+        };
         let cond = TermConditioning {
             mask_latent: &mask_latent,
             masked_image_latents: &masked_latents,
             prompts,
+            oracle,
         };
         guidance_term(&mut distiller, &g.prior, image, &cond, lambda, chain, at)
     }

@@ -480,3 +480,69 @@ fn visibility_gating_scales_the_guidance_that_reaches_the_field() {
     bad.visibility.observed_weight = 2.0;
     assert!(bad.validate().unwrap_err().contains("observed_weight"));
 }
+
+/// Oracle guidance ([`gb_inpaint::oracle`]) with SDS at guidance scale 1: the term's latent
+/// gradient is the pull `w(t) sqrt(a) / sqrt(1 - a) (z - z0)` to the object-free crop's
+/// latents, whatever the noise: zero on the truth itself, non-zero on the view with the
+/// object.
+#[test]
+fn an_oracle_score_pulls_to_the_object_free_crop_whatever_the_noise() {
+    use gb_diffusion::distill::{Branch, GuidanceMethod};
+    let _g = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let clean_dir = dir.path().join("clean");
+    let mut t = guided(&s, dir.path(), "bsd", |m| {
+        m.lambda_rgb = 1.0;
+        m.prior_input = PriorInputMode::PasteOnGroundTruth;
+        m.rgb.as_mut().unwrap().guidance = GuidanceMethod::Sds {
+            guidance_scale: 1.0,
+        };
+        m.oracle.clean = Some(clean_dir.clone());
+        m.oracle.branches = vec![Branch::Text, Branch::Unconditional];
+    });
+    let downscale = t.nerf.config.train.image_downscale;
+    let images =
+        gb_inpaint::oracle::load_object_free(&s, &clean_dir, downscale, "[oracle] clean").unwrap();
+    let view = t.guidance.as_ref().unwrap().views[0];
+    let clean = images[view]
+        .clone()
+        .expect("every training view has a clean image");
+    t.set_oracle(gb_inpaint::oracle::OracleTargets::new(
+        images,
+        vec![Branch::Text, Branch::Unconditional],
+    ));
+    let vg = t.view_guidance(view).unwrap().clone();
+    let r = vg.geometry.resolution;
+    let device = KIND.autodiff_device();
+    let dims = t.guidance.as_ref().unwrap().prior.info.resolution / 4;
+    let noise = |seed: usize| {
+        let v: Vec<f32> = (0..4 * dims * dims)
+            .map(|i| (((i + seed) * 7919) % 1000) as f32 / 500.0 - 1.0)
+            .collect();
+        Tensor::<4>::from_data(TensorData::new(v, [1, 4, dims, dims]), &KIND.device())
+    };
+    let truth = gb_inpaint::crop::crop_image(&clean, vg.geometry.bbox, r, &KIND.device());
+    let norm = |g: &[f32]| g.iter().map(|v| v * v).sum::<f32>().sqrt();
+    let mut grads = Vec::new();
+    for (image, seed) in [
+        (truth.clone(), 1),
+        (vg.ground_truth.clone(), 1),
+        (vg.ground_truth.clone(), 2),
+    ] {
+        let x = Tensor::<4>::from_data(image.into_data(), &device).require_grad();
+        let out = t
+            .term(Modality::Rgb, view, x, 0, Some((500, noise(seed))))
+            .unwrap();
+        assert_eq!(out.diagnostics.unet_calls, 1);
+        grads.push(values(out.gradient));
+    }
+    let (on_truth, with_object) = (norm(&grads[0]), norm(&grads[1]));
+    println!("oracle pull: {on_truth:.3e} on the truth, {with_object:.3e} with the object");
+    assert!(with_object > 1e-3, "{with_object}");
+    assert!(on_truth < 1e-4 * with_object, "{on_truth} vs {with_object}");
+    assert!(
+        max_rel(&grads[1], &grads[2]) < 1e-4,
+        "the pull depends on the noise"
+    );
+}

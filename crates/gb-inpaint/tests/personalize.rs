@@ -1,6 +1,6 @@
 //! Per-scene personalisation with the built-in tiny prior and its geometric LoRA on a small
 //! procedural stairs scene: the patches never show the object, training moves only the new
-//! adapters and lowers the inpainting loss on the scene's held-out batches, and a run reuses
+//! adapters and lowers the inpainting loss on fresh masks of its patches, and a run reuses
 //! its cached LoRA until something it was trained from changes.
 
 use std::path::{Path, PathBuf};
@@ -9,7 +9,8 @@ use std::sync::Mutex;
 use gb_core::BackendKind;
 use gb_finetune::sample::PairSource;
 use gb_inpaint::personalize::{
-    held_out_loss, new_trainer, personalize, scene_patches, PersonalizeInputs, PersonalizeSettings,
+    fresh_mask_loss, new_trainer, personalize, scene_patches, PersonalizeInputs,
+    PersonalizeSettings,
 };
 use gb_inpaint::{GuidancePrior, InpaintError};
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
@@ -56,12 +57,26 @@ fn inputs<'a>(
         resolution: 64,
         prompt: "RGB image, stairs",
         settings,
+        references: &[],
         backend: BackendKind::Flex,
         out,
     }
 }
 
 use gb_finetune::train::models::parameter_values;
+
+fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let target = to.join(e.file_name());
+        if e.path().is_dir() {
+            copy_tree(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), target).unwrap();
+        }
+    }
+}
 
 /// Every float parameter of `m` by path.
 fn params<M: burn::module::Module>(m: &M) -> std::collections::BTreeMap<String, Vec<f32>> {
@@ -107,13 +122,13 @@ fn patches_avoid_the_masks_and_training_moves_only_the_adapters_and_lowers_the_l
 
     let mut trainer = new_trainer(&i).unwrap();
     let before = params(&trainer.models.trainable);
-    let loss_before = held_out_loss(&trainer, &patches).unwrap();
+    let loss_before = fresh_mask_loss(&trainer, &patches).unwrap();
     for _ in 0..settings.steps {
         let step = trainer.train_step(&patches).unwrap();
         assert!(!step.skipped && step.loss.is_finite(), "{step:?}");
     }
-    let loss_after = held_out_loss(&trainer, &patches).unwrap();
-    eprintln!("held-out inpainting loss {loss_before:.5} -> {loss_after:.5}");
+    let loss_after = fresh_mask_loss(&trainer, &patches).unwrap();
+    eprintln!("fresh-mask inpainting loss {loss_before:.5} -> {loss_after:.5}");
     assert!(
         loss_after < 0.97 * loss_before,
         "{loss_before} -> {loss_after}"
@@ -158,6 +173,11 @@ fn a_run_reuses_its_lora_until_what_it_was_trained_from_changes() {
         "{again:?} against {first:?}"
     );
     assert_eq!(again.patches, first.patches);
+    // the cache follows the prior's contents, not its path: a copy elsewhere reuses it
+    let copy = dir.path().join("prior-copy");
+    copy_tree(&prior, &copy);
+    let moved = personalize(&inputs(&s, &copy, &lora, &settings, &out)).unwrap();
+    assert!(moved.cached, "a copy of the same prior must reuse the LoRA");
     let reseeded = PersonalizeSettings {
         seed: 1,
         ..settings.clone()
@@ -244,5 +264,72 @@ fn json_floats_read_back_bit_for_bit() {
         let text = serde_json::to_string(&x).unwrap();
         let back: f64 = serde_json::from_str(&text).unwrap();
         assert_eq!(back.to_bits(), x.to_bits(), "{x:e} written as {text}");
+    }
+}
+
+/// With `object_free` (a procedural scene's `clean/`), the views' masked squares join the
+/// patches, drawn from the object-free images; a folder without any view's image, or not a
+/// folder, is refused naming the setting.
+#[test]
+fn object_free_views_give_their_masked_squares_from_the_clean_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let (prior, lora) = tiny();
+    let out = dir.path().join("run");
+    let settings = PersonalizeSettings {
+        object_free: Some(dir.path().join("clean")),
+        ..PersonalizeSettings::default()
+    };
+    let i = inputs(&s, &prior, &lora, &settings, &out);
+    let patches = scene_patches(&i).unwrap();
+    let data =
+        gb_nerf::train::data::TrainData::from_scene(&s, 1, gb_nerf::train::DepthSupervision::None)
+            .unwrap();
+    let plain = gb_inpaint::personalize::ScenePatches::new(&data.views, patches.rects[0].side, "x");
+    assert!(
+        patches.len() > plain.len(),
+        "{} patches with clean views, {} without",
+        patches.len(),
+        plain.len()
+    );
+    let train: Vec<_> = s.split(Split::Train).collect();
+    let mut masked = 0;
+    for (k, r) in patches.rects.iter().enumerate() {
+        let view = train[r.view];
+        let m = view.mask.as_ref().unwrap();
+        let w = view.image.width;
+        let hit = (r.y0..r.y0 + r.side)
+            .flat_map(|y| (r.x0..r.x0 + r.side).map(move |x| (x, y)))
+            .find(|&(x, y)| m.data[y * w + x]);
+        if let Some((x, y)) = hit {
+            masked += 1;
+            // the masked pixel comes from clean/, not from the view with the object
+            let clean = gb_core::read_rgb(
+                &dir.path().join("clean").join(format!("{}.png", view.name)),
+                Some(s.background),
+            )
+            .unwrap();
+            let sample = patches.load(k).unwrap();
+            let at = ((y - r.y0) * r.side + (x - r.x0)) * 3;
+            assert_eq!(&sample.rgb[at..at + 3], &clean.get(x, y)[..]);
+        }
+    }
+    assert!(masked > 0, "no patch covers a mask");
+
+    std::fs::create_dir_all(dir.path().join("empty")).unwrap();
+    for (bad, why) in [
+        (dir.path().join("nowhere"), "not a folder"),
+        (dir.path().join("empty"), "holds no training view's image"),
+    ] {
+        let settings = PersonalizeSettings {
+            object_free: Some(bad),
+            ..PersonalizeSettings::default()
+        };
+        let e = scene_patches(&inputs(&s, &prior, &lora, &settings, &out)).unwrap_err();
+        let text = e.to_string();
+        assert!(
+            text.contains("[personalize] object_free") && text.contains(why),
+            "{text}"
+        );
     }
 }

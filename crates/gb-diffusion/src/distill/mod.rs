@@ -7,6 +7,8 @@
 //! - [`step`]: [`ScoreDistiller`], one step at latent resolution: `g = w(t) * direction`,
 //!   masked at latent resolution, non-finite values zeroed, optionally clamped, injected as
 //!   `(latents * g.detach()).sum()` so that autodiff runs through the encoder only.
+//! - [`oracle`]: the exact score of a point distribution at the true latents, for oracle
+//!   experiments that separate the prior from the distillation.
 //! - [`timestep`]: `t` uniform in `[0.02, 0.98]` or the reference's annealed schedule, and
 //!   `w(t)`; [`alphas`]: the noise schedule.
 //! - [`prior_input`], [`conditioning`], [`view_step`]: crop/resize/paste of the render,
@@ -24,6 +26,7 @@ pub mod error;
 pub mod gradient;
 pub mod guidance;
 pub mod noise;
+pub mod oracle;
 pub mod prior_input;
 pub mod sd_adapter;
 pub mod sds;
@@ -40,6 +43,7 @@ pub use diagnostics::StepDiagnostics;
 pub use eps::{EpsBatch, InpaintEpsPredictor, LatentEncoder};
 pub use error::DistillError;
 pub use guidance::{Branch, Guidance, GuidanceMethod};
+pub use oracle::OracleEps;
 pub use prior_input::{MaskBox, PriorInputMode};
 pub use sds::Sds;
 pub use step::{DistillOutput, DistillSettings, LatentTarget, PromptEmbeddings, ScoreDistiller};

@@ -6,6 +6,7 @@ mod finite_diff;
 mod fixture;
 mod formulas;
 mod mask;
+mod oracle;
 mod sd_prior;
 mod support;
 mod timesteps;

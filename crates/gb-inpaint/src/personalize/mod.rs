@@ -7,14 +7,21 @@
 //!   that touch no object mask (the object is never shown to the prior), captioned with the
 //!   run's appearance prompt; when fewer than [`MIN_PATCHES`] fit (a large object), the side
 //!   shrinks by a quarter at a time. RGB only: a scene has no ground-truth normal maps.
+//!   A view with an object-free image gives its masked squares too, from that image: each
+//!   reference view of the run ([`crate::reference`]), and each view with an image in the
+//!   `object_free` folder (a clean plate per view; a procedural scene's `clean/` is exact
+//!   ground truth, which makes the personalised prior the `prior-oracle` of
+//!   `bench quality --oracle`).
 //! - **Training**: a fresh LoRA (`rank`, `alpha`) on the U-Net attention projections of the
 //!   prior with its geometric LoRA (if the method uses one) merged, trained for `steps` AdamW
 //!   steps on the run's backend. Every other weight is frozen.
 //! - **Cache**: `OUT/personalize/lora.safetensors` (diffusers/PEFT format) and
 //!   `OUT/personalize/personalize.json` (what it was trained from and its losses). A run whose
-//!   prior, LoRA, prompt, settings and patches match reuses it; anything else retrains.
-//! - **Loss report**: the inpainting loss on [`EVAL_BATCHES`] fixed held-out batches of the
-//!   scene's patches (their own holes, noise and timesteps), before and after.
+//!   prior and LoRA contents (fingerprinted, wherever they lie), prompt, settings and patches
+//!   match reuses it; anything else retrains.
+//! - **Loss report**: the inpainting loss on [`EVAL_BATCHES`] fixed batches of the same
+//!   patches with fresh holes, noise and timesteps that training never draws, before and
+//!   after. It is not a held-out loss: the patches' pixels are trained on.
 //!
 //! Enabled with `[personalize] steps = N` in the method config or `--personalize N`; it works
 //! with any prior folder (the tiny prior, SD 1.5 inpainting).
@@ -24,13 +31,13 @@ pub mod patches;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use gb_core::BackendKind;
+use gb_core::{BackendKind, RgbImage};
 use gb_finetune::captions::CaptionMode;
 use gb_finetune::train::batch::make_batch;
 use gb_finetune::train::loss::inpainting_loss;
 use gb_finetune::train::{FinetuneConfig, FinetuneTrainer, PriorModels, TrainTarget};
 use gb_finetune::FinetuneError;
-use gb_nerf::scene::Scene;
+use gb_nerf::scene::{Scene, Split};
 use gb_nerf::train::data::TrainData;
 use gb_nerf::train::DepthSupervision;
 use serde::{Deserialize, Serialize};
@@ -38,9 +45,9 @@ use serde::{Deserialize, Serialize};
 use crate::error::InpaintError;
 pub use patches::ScenePatches;
 
-/// Held-out batches the loss is reported on.
+/// Fresh-mask batches the loss is reported on.
 pub const EVAL_BATCHES: usize = 8;
-/// The step index the held-out batches are drawn at: far beyond any run, so that their
+/// The step index the fresh-mask batches are drawn at: far beyond any run, so that their
 /// holes, noise and timesteps are never trained on.
 const EVAL_STEP: usize = 1 << 40;
 /// Fewest patches personalisation trains on before it shrinks them.
@@ -68,6 +75,11 @@ pub struct PersonalizeSettings {
     pub train_text_encoder: bool,
     /// Seed of the adapters, patches, holes, noise and timesteps.
     pub seed: u64,
+    /// A folder of object-free images of the training views (`NAME.png`, the view's size):
+    /// their masked squares are trained on too (module docs). Views without one are
+    /// patched as usual.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub object_free: Option<PathBuf>,
 }
 
 impl Default for PersonalizeSettings {
@@ -80,6 +92,7 @@ impl Default for PersonalizeSettings {
             batch: 4,
             train_text_encoder: false,
             seed: 0,
+            object_free: None,
         }
     }
 }
@@ -128,7 +141,10 @@ pub struct PersonalizeReport {
     pub patches: usize,
     /// Their side, training-resolution pixels.
     pub patch_side: usize,
-    /// Mean inpainting loss on the held-out batches before training.
+    /// Views whose object-free image was trained on, masked region included.
+    #[serde(default)]
+    pub object_free_views: usize,
+    /// Mean inpainting loss on the fresh-mask batches of the patches before training.
     pub loss_before: f64,
     /// The same after training.
     pub loss_after: f64,
@@ -138,11 +154,12 @@ pub struct PersonalizeReport {
     pub cached: bool,
 }
 
-/// What the cache is valid for.
+/// What the cache is valid for: the contents (not the paths) of the prior folder and the
+/// LoRA, the prompt, the settings and the patches.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct CacheKey {
-    prior: PathBuf,
-    lora: Option<PathBuf>,
+    prior: String,
+    lora: Option<String>,
     prompt: String,
     settings: PersonalizeSettings,
     patches: String,
@@ -160,8 +177,9 @@ fn finetune_err(context: &str) -> impl Fn(FinetuneError) -> InpaintError + '_ {
     }
 }
 
-/// The mean inpainting loss of `trainer`'s prior on the held-out batches of `source`.
-pub fn held_out_loss(
+/// The mean inpainting loss of `trainer`'s prior on [`EVAL_BATCHES`] batches of `source`
+/// with holes, noise and timesteps that training never draws (its patches are trained on).
+pub fn fresh_mask_loss(
     trainer: &FinetuneTrainer,
     source: &ScenePatches,
 ) -> Result<f64, FinetuneError> {
@@ -202,16 +220,46 @@ pub struct PersonalizeInputs<'a> {
     pub prompt: &'a str,
     /// The settings.
     pub settings: &'a PersonalizeSettings,
+    /// The run's reference views: their images are trained on, masked region included.
+    pub references: &'a [crate::reference::ReferenceView],
     /// The backend to train on.
     pub backend: BackendKind,
     /// The run folder (the cache lives in `OUT/personalize/`).
     pub out: &'a Path,
 }
 
+/// The object-free image of each training view at the training resolution, where there is
+/// one: the run's references, then the `object_free` folder's `NAME.png` (module docs). An
+/// error names the setting and the file: an unreadable folder or image, a wrong size, a
+/// folder without any training view's image.
+pub fn object_free_images(i: &PersonalizeInputs) -> Result<Vec<Option<RgbImage>>, InpaintError> {
+    let mut out: Vec<Option<RgbImage>> = vec![None; i.scene.split(Split::Train).count()];
+    for r in i.references {
+        if let Some(slot) = out.get_mut(r.view) {
+            *slot = Some(r.image.clone());
+        }
+    }
+    if let Some(dir) = i.settings.object_free.as_deref() {
+        let found = crate::oracle::load_object_free(
+            i.scene,
+            dir,
+            i.downscale,
+            "[personalize] object_free",
+        )?;
+        for (slot, image) in out.iter_mut().zip(found) {
+            if slot.is_none() {
+                *slot = image;
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// The scene's training patches at the guidance crop's size (see [`patches`]); an error when
 /// no view has a mask or no patch avoids the masks.
 pub fn scene_patches(i: &PersonalizeInputs) -> Result<ScenePatches, InpaintError> {
     let data = TrainData::from_scene(i.scene, i.downscale, DepthSupervision::None)?;
+    let object_free = object_free_images(i)?;
     let side = patches::crop_side(&data.views, i.crop_margin).ok_or_else(|| {
         InpaintError::Personalize {
             reason: format!("scene '{}' has no masked training view", i.scene.name),
@@ -220,10 +268,11 @@ pub fn scene_patches(i: &PersonalizeInputs) -> Result<ScenePatches, InpaintError
     // a large object leaves few mask-free squares of the crop's size: shrink them until
     // there are enough (the prior then sees the scene at a somewhat finer scale)
     let mut side = side;
-    let mut source = ScenePatches::new(&data.views, side, i.prompt);
+    let patches = |side| ScenePatches::with_object_free(&data.views, &object_free, side, i.prompt);
+    let mut source = patches(side);
     while source.rects.len() < MIN_PATCHES && side > MIN_PATCH_SIDE {
         side = (side * 3 / 4).max(MIN_PATCH_SIDE);
-        source = ScenePatches::new(&data.views, side, i.prompt);
+        source = patches(side);
     }
     if source.rects.is_empty() {
         return Err(InpaintError::Personalize {
@@ -250,12 +299,18 @@ pub fn new_trainer(i: &PersonalizeInputs) -> Result<FinetuneTrainer, InpaintErro
 /// Trains (or reuses from the cache) the per-scene LoRA; see the module docs.
 pub fn personalize(i: &PersonalizeInputs) -> Result<PersonalizeReport, InpaintError> {
     let source = scene_patches(i)?;
+    let object_free_views = object_free_images(i)?.iter().flatten().count();
     let side = source.rects[0].side;
     let dir = i.out.join(FOLDER);
     let (lora_path, json_path) = (dir.join("lora.safetensors"), dir.join("personalize.json"));
+    let contents = |p: &Path| {
+        gb_core::fingerprint::contents(p)
+            .map(|h| format!("{h:016x}"))
+            .map_err(|e| InpaintError::io(p, e))
+    };
     let key = CacheKey {
-        prior: i.prior.to_path_buf(),
-        lora: i.lora.map(Path::to_path_buf),
+        prior: contents(i.prior)?,
+        lora: i.lora.map(contents).transpose()?,
         prompt: i.prompt.to_string(),
         settings: i.settings.clone(),
         patches: format!("{:016x}", source.fingerprint()),
@@ -273,10 +328,12 @@ pub fn personalize(i: &PersonalizeInputs) -> Result<PersonalizeReport, InpaintEr
     }
     std::fs::create_dir_all(&dir).map_err(|e| InpaintError::io(&dir, e))?;
     let mut trainer = new_trainer(i)?;
-    let loss_before = held_out_loss(&trainer, &source).map_err(finetune_err("held-out loss"))?;
+    let loss_before =
+        fresh_mask_loss(&trainer, &source).map_err(finetune_err("fresh-mask loss"))?;
     tracing::info!(
         patches = source.rects.len(),
         side,
+        object_free_views,
         steps = i.settings.steps,
         loss_before,
         "personalisation: training a per-scene LoRA"
@@ -291,7 +348,7 @@ pub fn personalize(i: &PersonalizeInputs) -> Result<PersonalizeReport, InpaintEr
     }
     bar.finish_and_clear();
     let seconds = started.elapsed().as_secs_f64();
-    let loss_after = held_out_loss(&trainer, &source).map_err(finetune_err("held-out loss"))?;
+    let loss_after = fresh_mask_loss(&trainer, &source).map_err(finetune_err("fresh-mask loss"))?;
     let tmp = dir.join("lora.safetensors.partial");
     trainer
         .export_lora(&tmp)
@@ -302,6 +359,7 @@ pub fn personalize(i: &PersonalizeInputs) -> Result<PersonalizeReport, InpaintEr
         steps: i.settings.steps,
         patches: source.rects.len(),
         patch_side: side,
+        object_free_views,
         loss_before,
         loss_after,
         seconds,

@@ -1,5 +1,7 @@
 //! The scene's own training data for personalisation: square patches of the training views
-//! that no object mask touches, at the size of the guidance crops.
+//! that no object mask touches, at the size of the guidance crops. A view with an
+//! object-free image (a reference view, or a clean plate) gives every square of that image,
+//! its masked region included: there the prior is shown what the hole holds.
 
 use gb_core::RgbImage;
 use gb_finetune::sample::{PairSample, PairSource};
@@ -67,7 +69,19 @@ impl ScenePatches {
     /// Every square of `side` on a grid of stride `side / 4` over each view that touches no
     /// mask pixel. `caption` is the prompt each sample is trained with.
     pub fn new(views: &[TrainView], side: usize, caption: &str) -> Self {
+        Self::with_object_free(views, &[], side, caption)
+    }
+
+    /// As [`ScenePatches::new`], but a view `i` with `object_free[i]` (the view without the
+    /// object, at the training resolution) gives the squares of that image, masked or not.
+    pub fn with_object_free(
+        views: &[TrainView],
+        object_free: &[Option<RgbImage>],
+        side: usize,
+        caption: &str,
+    ) -> Self {
         let stride = (side / 4).max(1);
+        let clean = |i: usize| object_free.get(i).and_then(Option::as_ref);
         let mut rects = Vec::new();
         for (i, v) in views.iter().enumerate() {
             let (w, h) = (v.image.width, v.image.height);
@@ -76,7 +90,7 @@ impl ScenePatches {
             }
             for y0 in (0..=h - side).step_by(stride) {
                 for x0 in (0..=w - side).step_by(stride) {
-                    if !touches_mask(v, x0, y0, side) {
+                    if clean(i).is_some() || !touches_mask(v, x0, y0, side) {
                         rects.push(PatchRect {
                             view: i,
                             x0,
@@ -88,7 +102,11 @@ impl ScenePatches {
             }
         }
         Self {
-            images: views.iter().map(|v| v.image.clone()).collect(),
+            images: views
+                .iter()
+                .enumerate()
+                .map(|(i, v)| clean(i).unwrap_or(&v.image).clone())
+                .collect(),
             rects,
             caption: caption.to_string(),
         }
@@ -96,21 +114,17 @@ impl ScenePatches {
 
     /// A fingerprint of the patches' pixels and caption (FNV-1a), for the cache.
     pub fn fingerprint(&self) -> u64 {
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        let mut word = |w: u64| {
-            h ^= w;
-            h = h.wrapping_mul(0x0000_0100_0000_01b3);
-        };
+        let mut h = gb_core::fingerprint::Fnv64::default();
         for r in &self.rects {
             [r.view, r.x0, r.y0, r.side]
                 .iter()
-                .for_each(|v| word(*v as u64));
+                .for_each(|v| h.word(*v as u64));
         }
         for img in &self.images {
-            img.data.iter().for_each(|f| word(f.to_bits() as u64));
+            img.data.iter().for_each(|f| h.word(f.to_bits() as u64));
         }
-        self.caption.bytes().for_each(|b| word(b as u64));
-        h
+        h.bytes(self.caption.as_bytes());
+        h.finish()
     }
 }
 

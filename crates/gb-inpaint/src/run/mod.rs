@@ -172,6 +172,7 @@ fn personalize_prior(
     scene: &gb_nerf::scene::Scene,
     config: &gb_nerf::train::NerfConfig,
     prompts: &crate::Prompts,
+    references: &[crate::reference::ReferenceView],
     prior: &mut Option<GuidancePrior>,
 ) -> Result<Option<PersonalizeReport>, InpaintError> {
     if !method.personalize.enabled() {
@@ -191,6 +192,7 @@ fn personalize_prior(
         resolution: info.resolution,
         prompt: &prompts.appearance,
         settings: &method.personalize,
+        references,
         backend: spec.device,
         out: &spec.out,
     })?;
@@ -265,7 +267,15 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         field: format!("--out {}", out.display()),
         reason: format!("cannot create the output folder: {e}"),
     })?;
-    let personalized = personalize_prior(spec, &method, &scene, &config, &prompts, &mut prior)?;
+    let personalized = personalize_prior(
+        spec,
+        &method,
+        &scene,
+        &config,
+        &prompts,
+        &references,
+        &mut prior,
+    )?;
     let prior_info = prior.as_ref().map(|p| p.info.clone());
     let ckpt = out.join("checkpoint.bin");
     let resuming = spec.resume && ckpt.is_file();
@@ -291,6 +301,23 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         );
     }
     trainer.set_references(references);
+    if let Some(dir) = method.oracle.clean.as_deref() {
+        let images = crate::oracle::load_object_free(
+            &scene,
+            dir,
+            trainer.config.train.image_downscale,
+            "[oracle] clean",
+        )?;
+        tracing::warn!(
+            views = images.iter().flatten().count(),
+            branches = ?method.oracle.branches,
+            "ORACLE guidance: the RGB term's score is the exact one of the object-free images"
+        );
+        trainer.set_oracle(crate::oracle::OracleTargets::new(
+            images,
+            method.oracle.branches.clone(),
+        ));
+    }
     config_file::write_config(
         spec,
         &config_file::ResolvedRun {
