@@ -32,7 +32,8 @@ use gb_nerf::field::NerfField;
 use gb_nerf::render::image::NormalSource;
 use gb_nerf::render::rays::{all_pixels, camera_rays, crop_camera};
 use gb_nerf::render::{
-    density_gradient_normals, depth_to_normals, render_rays, Background, Intrinsics, PlaneFitConfig,
+    density_gradient_normals, depth_to_normals, render_rays, render_samples_appearance_only,
+    sample_and_prune, Background, Intrinsics, PlaneFitConfig,
 };
 use gb_nerf::sampler::{OccupancyGrid, SceneSpace};
 use gb_nerf::scene::{Camera, Mask};
@@ -196,6 +197,9 @@ pub struct RenderContext<'a> {
     pub background: Background,
     /// Normal source.
     pub normals: NormalSource,
+    /// Whether the RGB prior input's graph reaches only the colour head (the method's
+    /// `rgb_moves_geometry = false`); the normal map always reaches the geometry.
+    pub rgb_appearance_only: bool,
 }
 
 /// The per-view constants of the RGB guidance, computed once per view.
@@ -249,17 +253,31 @@ fn render_pixels(
     camera: &Camera,
     pixels: &[[f32; 2]],
     want_normals: bool,
+    appearance_only: bool,
 ) -> (Tensor<2>, Tensor<1>, Option<Tensor<2>>) {
     let rays = camera_rays(camera, pixels, ctx.space, ctx.near, ctx.far);
-    let (out, samples) = render_rays::<ChaCha8Rng>(
-        ctx.field,
-        ctx.space,
-        &rays,
-        ctx.samples_per_ray,
-        ctx.occupancy,
-        ctx.background,
-        None,
-    );
+    let (out, samples) = if appearance_only {
+        let samples = sample_and_prune::<ChaCha8Rng>(
+            ctx.field,
+            &rays,
+            ctx.space,
+            ctx.samples_per_ray,
+            ctx.occupancy,
+            None,
+        );
+        let out = render_samples_appearance_only(ctx.field, &samples, ctx.background);
+        (out, samples)
+    } else {
+        render_rays::<ChaCha8Rng>(
+            ctx.field,
+            ctx.space,
+            &rays,
+            ctx.samples_per_ray,
+            ctx.occupancy,
+            ctx.background,
+            None,
+        )
+    };
     let normals = match (want_normals, ctx.normals) {
         (true, NormalSource::DensityGradient { step }) => Some(density_gradient_normals(
             ctx.field,
@@ -315,13 +333,13 @@ pub fn render_rgb_input(
     let grid = all_pixels(r, r);
     match mode {
         PriorInputMode::RenderOnly => {
-            let (rgb, _, _) = render_pixels(ctx, &camera, &grid, false);
+            let (rgb, _, _) = render_pixels(ctx, &camera, &grid, false, ctx.rgb_appearance_only);
             let image = rgb.reshape([r, r, 3]).permute([2, 0, 1]).unsqueeze_dim(0);
             (image, r * r)
         }
         PriorInputMode::PasteOnGroundTruth => {
             let pixels: Vec<[f32; 2]> = g.masked.iter().map(|&i| grid[i]).collect();
-            let (rgb, _, _) = render_pixels(ctx, &camera, &pixels, false);
+            let (rgb, _, _) = render_pixels(ctx, &camera, &pixels, false, ctx.rgb_appearance_only);
             let inside = scatter_rows(rgb, &g.masked, r);
             let keep = view.mask.ones_like() - view.mask.clone();
             let outside = like_device(view.ground_truth.clone() * keep.repeat_dim(1, 3), &inside);
@@ -343,7 +361,7 @@ pub fn render_normal_input(
     let camera = g.camera(rn);
     let grid = all_pixels(rn, rn);
     let want_gradient = matches!(ctx.normals, NormalSource::DensityGradient { .. });
-    let (_, depth, normals) = render_pixels(ctx, &camera, &grid, want_gradient);
+    let (_, depth, normals) = render_pixels(ctx, &camera, &grid, want_gradient, false);
     let plane_fit = |cfg: PlaneFitConfig| {
         depth_to_normals(
             depth.clone().reshape([rn, rn]),

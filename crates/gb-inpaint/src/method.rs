@@ -263,6 +263,12 @@ pub struct MethodConfig {
     /// through the noisy latents does (see the module docs).
     #[serde(default = "default_true")]
     pub reference_chain_rule: bool,
+    /// Whether the RGB guidance's gradient reaches the geometry (the density and the
+    /// encoding the colour head shares with it). `false`: only the colour head learns from
+    /// it (`gb_nerf::render::render_samples_appearance_only`); the normal term still shapes
+    /// the geometry. Left out of the written config while true (the paper).
+    #[serde(default = "default_true", skip_serializing_if = "is_true")]
+    pub rgb_moves_geometry: bool,
     /// Stop after this many consecutive non-finite losses.
     #[serde(default = "default_max_nan")]
     pub max_consecutive_nan: usize,
@@ -323,6 +329,10 @@ fn default_margin() -> f32 {
 fn default_normal_divisor() -> usize {
     2
 }
+fn is_true(v: &bool) -> bool {
+    *v
+}
+
 fn default_true() -> bool {
     true
 }

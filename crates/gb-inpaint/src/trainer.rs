@@ -613,6 +613,7 @@ impl GuidedTrainer {
             far: self.nerf.far,
             samples_per_ray: self.nerf.config.sampler.samples_per_ray,
             occupancy: self.nerf.occupancy.as_ref(),
+            rgb_appearance_only: !self.method.rgb_moves_geometry,
             background: self.nerf.background,
             normals: self.nerf.config.render.normals,
         }

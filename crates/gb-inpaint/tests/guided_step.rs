@@ -546,3 +546,48 @@ fn an_oracle_score_pulls_to_the_object_free_crop_whatever_the_noise() {
         "the pull depends on the noise"
     );
 }
+
+/// `rgb_moves_geometry = false`: the RGB term's gradient reaches the colour head only, never
+/// the hash table or the density network; the normal term still reaches the geometry.
+#[test]
+fn appearance_only_rgb_guidance_leaves_the_geometry_alone() {
+    let _g = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let mut t = guided(&s, dir.path(), "gb-nerf", |m| {
+        m.lambda_rgb = 1.0;
+        m.lambda_normal = 1.0;
+        m.rgb_moves_geometry = false;
+    });
+    let view = t.guidance.as_ref().unwrap().views[0];
+    let (image, _) = t.rgb_prior_input(view).unwrap();
+    let out = t.term(Modality::Rgb, view, image, 0, None).unwrap();
+    let grads = out.loss.backward();
+    let f = &t.field;
+    let reached = |g: Option<Tensor<2>>| g.is_some_and(|g| values(g).iter().any(|v| *v != 0.0));
+    assert!(
+        !f.grid
+            .as_ref()
+            .is_some_and(|g| reached(g.table.val().grad(&grads))),
+        "the RGB term reached the hash table"
+    );
+    assert!(
+        f.density_net
+            .layers
+            .iter()
+            .all(|l| !reached(l.weight.val().grad(&grads))),
+        "the RGB term reached the density network"
+    );
+    assert!(
+        f.color_net
+            .layers
+            .iter()
+            .any(|l| reached(l.weight.val().grad(&grads))),
+        "the RGB term did not reach the colour head"
+    );
+    // the normal map still shapes the geometry
+    let (normal, _) = t.normal_prior_input(view).unwrap();
+    let out = t.term(Modality::Normal, view, normal, 0, None).unwrap();
+    let (geometry, _) = param_grads(&t.field, &out.loss.backward());
+    assert!(geometry.iter().any(|v| *v != 0.0));
+}

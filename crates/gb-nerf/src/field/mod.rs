@@ -197,12 +197,25 @@ impl NerfField {
 
     /// Density `[N]` and colour `[N, 3]` at `points` seen along unit world `dirs`.
     pub fn forward(&self, points: &[[f32; 3]], dirs: &[[f32; 3]]) -> (Tensor<1>, Tensor<2>) {
+        self.forward_with(points, dirs, false)
+    }
+
+    /// [`Self::forward`] with the density network's output (the density and the features the
+    /// colour head reads) detached when `appearance_only`: a loss on the result then moves
+    /// the colour head alone, never the geometry or the shared encoding.
+    pub fn forward_with(
+        &self,
+        points: &[[f32; 3]],
+        dirs: &[[f32; 3]],
+        appearance_only: bool,
+    ) -> (Tensor<1>, Tensor<2>) {
         let device = self.device();
         let n = points.len();
         if n == 0 {
             return (Tensor::zeros([0], &device), Tensor::zeros([0, 3], &device));
         }
         let h = self.trunk(points);
+        let h = if appearance_only { h.detach() } else { h };
         let width = h.dims()[1];
         let sigma = self.activate_density(h.clone().narrow(1, 0, 1));
         let geo = h.narrow(1, 1, width - 1);

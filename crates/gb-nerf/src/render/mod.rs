@@ -48,14 +48,15 @@ fn forward_chunked(
     field: &NerfField,
     points: &[[f32; 3]],
     dirs: &[[f32; 3]],
+    appearance_only: bool,
 ) -> (Tensor<1>, Tensor<2>) {
     if points.len() <= FIELD_CHUNK_SAMPLES {
-        return field.forward(points, dirs);
+        return field.forward_with(points, dirs, appearance_only);
     }
     let (sigmas, rgbs): (Vec<_>, Vec<_>) = points
         .chunks(FIELD_CHUNK_SAMPLES)
         .zip(dirs.chunks(FIELD_CHUNK_SAMPLES))
-        .map(|(p, d)| field.forward(p, d))
+        .map(|(p, d)| field.forward_with(p, d, appearance_only))
         .unzip();
     (Tensor::cat(sigmas, 0), Tensor::cat(rgbs, 0))
 }
@@ -66,7 +67,7 @@ pub fn render_samples(
     samples: &SampleSet,
     background: Background,
 ) -> VolumeOutput {
-    render_samples_with(field, samples, background, false)
+    render_samples_with(field, samples, background, Trainable::All)
 }
 
 /// [`render_samples`] with the density detached from the graph: a loss on the colour moves
@@ -78,20 +79,43 @@ pub fn render_samples_fixed_geometry(
     samples: &SampleSet,
     background: Background,
 ) -> VolumeOutput {
-    render_samples_with(field, samples, background, true)
+    render_samples_with(field, samples, background, Trainable::NotDensity)
+}
+
+/// [`render_samples`] with everything but the colour head detached: a loss on the colour
+/// moves neither the density nor the encoding and features it shares with the density.
+pub fn render_samples_appearance_only(
+    field: &NerfField,
+    samples: &SampleSet,
+    background: Background,
+) -> VolumeOutput {
+    render_samples_with(field, samples, background, Trainable::AppearanceOnly)
+}
+
+/// Which part of the field a render's graph reaches.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Trainable {
+    All,
+    NotDensity,
+    AppearanceOnly,
 }
 
 fn render_samples_with(
     field: &NerfField,
     samples: &SampleSet,
     background: Background,
-    detach_density: bool,
+    trainable: Trainable,
 ) -> VolumeOutput {
     let device = field.device();
     let (r, s) = (samples.rays, samples.samples);
-    let (sigma, rgb) = forward_chunked(field, &samples.points, &samples.view_dirs);
+    let (sigma, rgb) = forward_chunked(
+        field,
+        &samples.points,
+        &samples.view_dirs,
+        trainable == Trainable::AppearanceOnly,
+    );
     let sigma = expand_dense(sigma, samples).reshape([r, s]);
-    let sigma = if detach_density {
+    let sigma = if trainable == Trainable::NotDensity {
         sigma.detach()
     } else {
         sigma
@@ -205,7 +229,7 @@ mod tests {
             })
             .collect();
         let dirs = vec![[0.0, 0.6, -0.8]; n];
-        let (s1, c1) = forward_chunked(&field, &pts, &dirs);
+        let (s1, c1) = forward_chunked(&field, &pts, &dirs, false);
         let (s2, c2) = field.forward(&pts, &dirs);
         assert_eq!(s1.dims(), [n]);
         assert_eq!(c1.dims(), [n, 3]);
