@@ -127,8 +127,8 @@ pub fn reference_view(scene: &procedural::GeneratedScene) -> Option<&procedural:
     train.get(train.len() / 2).copied()
 }
 
-/// Writes `dir/NAME.toml`: the `none` method with the reference `VIEW.png=IMAGE`, headed by
-/// `comment` lines. Returns its path.
+/// Writes `dir/NAME.toml`: the `none` method with the reference `VIEW.png=IMAGE`, described
+/// by `comment`. Returns its path.
 fn write_reference_method(
     dir: &Path,
     name: &str,
@@ -136,19 +136,12 @@ fn write_reference_method(
     view: &str,
     image: &Path,
 ) -> anyhow::Result<PathBuf> {
+    let mut method = gb_inpaint::MethodConfig::load("none")?;
+    method.name = name.into();
+    method.description = comment.into();
     let image = std::path::absolute(image)?;
-    // a JSON string is a valid TOML basic string
-    let pair = serde_json::to_string(&format!("{view}.png={}", image.display()))?;
-    let description = serde_json::to_string(comment)?;
-    let text = format!(
-        "# {comment}\nname = \"{name}\"\ndescription = {description}\nmax_consecutive_nan = 10\n\n\
-         [rgb]\nmethod = \"none\"\n\n[normal]\nmethod = \"none\"\n\n[reference]\nimages = [{pair}]\n"
-    );
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let path = dir.join(format!("{name}.toml"));
-    gb_core::write_atomic(&path, text.as_bytes())
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(path)
+    method.reference.images = vec![format!("{view}.png={}", image.display())];
+    write_method(dir, &method)
 }
 
 /// Writes `dir/reference-oracle.toml` (module docs): the `none` method with the middle
@@ -594,6 +587,20 @@ mod tests {
             (default.lambda_normal, &default.normal, &default.visibility)
         );
         assert_eq!(score.rgb.unwrap().guidance.name(), "sds");
+        let reference = gb_inpaint::MethodConfig::load(
+            write_reference_method(dir.path(), "r", "a note", "view_003", &scene.join("x.png"))
+                .unwrap()
+                .to_str()
+                .unwrap(),
+        )
+        .unwrap();
+        assert_eq!(
+            (reference.name.as_str(), reference.rgb.is_none()),
+            ("r", true)
+        );
+        assert_eq!(reference.reference.images.len(), 1);
+        assert!(reference.reference.images[0].starts_with("view_003.png="));
+        assert!(reference.reference.images[0].ends_with("scene/x.png"));
     }
 
     #[test]

@@ -25,7 +25,7 @@ impl Fnv64 {
     pub fn bytes(&mut self, b: &[u8]) {
         let mut chunks = b.chunks_exact(8);
         for c in &mut chunks {
-            self.word(u64::from_le_bytes(c.try_into().expect("eight bytes")));
+            self.word(word_of(c));
         }
         let rest = chunks.remainder();
         if !rest.is_empty() {
@@ -40,6 +40,13 @@ impl Fnv64 {
     pub fn finish(&self) -> u64 {
         self.0
     }
+}
+
+/// The little-endian word of eight bytes.
+fn word_of(eight: &[u8]) -> u64 {
+    let mut w = [0u8; 8];
+    w.copy_from_slice(eight);
+    u64::from_le_bytes(w)
 }
 
 /// The fingerprint of the contents of `path`: a file's bytes, or every file under a folder
@@ -73,13 +80,24 @@ fn add_contents(h: &mut Fnv64, path: &Path, rel: &Path) -> std::io::Result<()> {
             break;
         }
         total += n as u64;
-        for &byte in &buf[..n] {
-            carry[held] = byte;
+        let mut rest = &buf[..n];
+        // finish a word the last read began, then whole words, then keep the tail
+        while held > 0 && !rest.is_empty() {
+            carry[held] = rest[0];
             held += 1;
+            rest = &rest[1..];
             if held == 8 {
                 h.word(u64::from_le_bytes(carry));
                 held = 0;
             }
+        }
+        let mut words = rest.chunks_exact(8);
+        for w in &mut words {
+            h.word(word_of(w));
+        }
+        for &byte in words.remainder() {
+            carry[held] = byte;
+            held += 1;
         }
     }
     if held > 0 {

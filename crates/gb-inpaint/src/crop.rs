@@ -32,7 +32,7 @@ use gb_nerf::field::NerfField;
 use gb_nerf::render::image::NormalSource;
 use gb_nerf::render::rays::{all_pixels, camera_rays, crop_camera};
 use gb_nerf::render::{
-    density_gradient_normals, depth_to_normals, render_rays, render_samples_appearance_only,
+    density_gradient_normals, depth_to_normals, render_samples, render_samples_appearance_only,
     sample_and_prune, Background, Intrinsics, PlaneFitConfig,
 };
 use gb_nerf::sampler::{OccupancyGrid, SceneSpace};
@@ -256,27 +256,18 @@ fn render_pixels(
     appearance_only: bool,
 ) -> (Tensor<2>, Tensor<1>, Option<Tensor<2>>) {
     let rays = camera_rays(camera, pixels, ctx.space, ctx.near, ctx.far);
-    let (out, samples) = if appearance_only {
-        let samples = sample_and_prune::<ChaCha8Rng>(
-            ctx.field,
-            &rays,
-            ctx.space,
-            ctx.samples_per_ray,
-            ctx.occupancy,
-            None,
-        );
-        let out = render_samples_appearance_only(ctx.field, &samples, ctx.background);
-        (out, samples)
+    let samples = sample_and_prune::<ChaCha8Rng>(
+        ctx.field,
+        &rays,
+        ctx.space,
+        ctx.samples_per_ray,
+        ctx.occupancy,
+        None,
+    );
+    let out = if appearance_only {
+        render_samples_appearance_only(ctx.field, &samples, ctx.background)
     } else {
-        render_rays::<ChaCha8Rng>(
-            ctx.field,
-            ctx.space,
-            &rays,
-            ctx.samples_per_ray,
-            ctx.occupancy,
-            ctx.background,
-            None,
-        )
+        render_samples(ctx.field, &samples, ctx.background)
     };
     let normals = match (want_normals, ctx.normals) {
         (true, NormalSource::DensityGradient { step }) => Some(density_gradient_normals(

@@ -417,12 +417,15 @@ impl MethodConfig {
             return Err(msg.into());
         }
         if self.oracle.clean.is_some() {
-            let branches = self
-                .rgb
-                .as_ref()
-                .and_then(|r| r.guidance.build().ok())
-                .map(|g| g.branches().to_vec())
-                .unwrap_or_default();
+            let branches = match &self.rgb {
+                Some(r) => r
+                    .guidance
+                    .build()
+                    .map_err(|e| e.to_string())?
+                    .branches()
+                    .to_vec(),
+                None => Vec::new(),
+            };
             if !self.oracle.branches.iter().any(|b| branches.contains(b)) {
                 return Err(format!(
                     "[oracle] answers {:?}, but the RGB guidance evaluates {:?}: the oracle \

@@ -69,14 +69,11 @@ impl InpaintEpsPredictor for OracleEps<'_> {
             .branches
             .iter()
             .enumerate()
-            .map(|(i, br)| {
-                if self.oracle_branches.contains(br) {
-                    self.exact_eps(noisy.clone().narrow(0, i * b, b), timestep)
-                } else {
-                    real.clone()
-                        .expect("a real prediction for a non-oracle branch")
-                        .narrow(0, i * b, b)
+            .map(|(i, br)| match &real {
+                Some(real) if !self.oracle_branches.contains(br) => {
+                    real.clone().narrow(0, i * b, b)
                 }
+                _ => self.exact_eps(noisy.clone().narrow(0, i * b, b), timestep),
             })
             .collect();
         Ok(Tensor::cat(rows, 0))

@@ -299,7 +299,7 @@ pub fn new_trainer(i: &PersonalizeInputs) -> Result<FinetuneTrainer, InpaintErro
 /// Trains (or reuses from the cache) the per-scene LoRA; see the module docs.
 pub fn personalize(i: &PersonalizeInputs) -> Result<PersonalizeReport, InpaintError> {
     let source = scene_patches(i)?;
-    let object_free_views = object_free_images(i)?.iter().flatten().count();
+    let object_free_views = source.object_free_views;
     let side = source.rects[0].side;
     let dir = i.out.join(FOLDER);
     let (lora_path, json_path) = (dir.join("lora.safetensors"), dir.join("personalize.json"));

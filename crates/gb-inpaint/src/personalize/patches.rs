@@ -30,6 +30,8 @@ pub struct ScenePatches {
     images: Vec<RgbImage>,
     /// The patches, in view-major, row-major order.
     pub rects: Vec<PatchRect>,
+    /// Views whose object-free image the patches come from.
+    pub object_free_views: usize,
     caption: String,
 }
 
@@ -107,6 +109,7 @@ impl ScenePatches {
                 .enumerate()
                 .map(|(i, v)| clean(i).unwrap_or(&v.image).clone())
                 .collect(),
+            object_free_views: (0..views.len()).filter(|&i| clean(i).is_some()).count(),
             rects,
             caption: caption.to_string(),
         }
