@@ -534,6 +534,20 @@ fn cases() -> Vec<(&'static str, Setup)> {
                 &["typo.toml", "unknown field `lambda_rgbb`", "line 1"],
             )
         }),
+        case("a guidance weight that is neither a number nor auto", |c| {
+            let unseen = std::fs::read_to_string(
+                workspace_root().join("configs/methods/gb-nerf-unseen.toml"),
+            )
+            .unwrap()
+            .replace("lambda_rgb = 1e-5", "lambda_rgb = \"big\"");
+            let m = c.path("weight.toml");
+            std::fs::write(&m, unseen).unwrap();
+            let s = c.scene();
+            run(
+                c.inpaint(&s, &["--method", path_str(&m)]),
+                &["weight.toml", "expected a number or \"auto\"", "lambda_rgb"],
+            )
+        }),
         case("an [oracle] clean folder that does not exist", |c| {
             let unseen = std::fs::read_to_string(
                 workspace_root().join("configs/methods/gb-nerf-unseen.toml"),

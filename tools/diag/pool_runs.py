@@ -8,7 +8,8 @@ variants are method files rather than rows of `bench quality`:
         --run SCENE:LABEL:RUN_DIR [--run ...] [--rank LABEL,LABEL,...]
 
 Each run folder's metrics.json gives the test views' mask-box SSIM, PSNR, ST-LPIPS and
-D-PSNR (null where the run had no metric weights). `--rank` ranks the listed labels per
+D-PSNR (null where the run had no metric weights), and for a method with `"auto"` weights the
+choice (`auto`: the pseudo-hole, each trial's scores and the chosen weights). `--rank` ranks the listed labels per
 scene and per bar metric (SSIM up, ST-LPIPS down, D-PSNR up; the rule of rank_methods.py)
 and sums the ranks; the lowest sum wins.
 """
@@ -34,6 +35,8 @@ def metrics(run_dir):
         "train_seconds": m.get("train_seconds_this_run"),
         "method": m.get("method"),
         "run": run_dir,
+        # the weights the scene chose (lambda = "auto"): pseudo-hole, trials, choice
+        "auto": m.get("auto"),
     }
 
 

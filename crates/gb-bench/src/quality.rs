@@ -192,7 +192,7 @@ pub fn write_score_oracle(scene_dir: &Path, dir: &Path) -> anyhow::Result<PathBu
     let mut method = gb_inpaint::MethodConfig::load(gb_inpaint::run::DEFAULT_METHOD)?;
     method.name = SCORE_ORACLE.into();
     method.description = SCORE_ORACLE_NOTE.into();
-    method.lambda_rgb = 1e-4;
+    method.lambda_rgb = 1e-4.into();
     let rgb = method
         .rgb
         .as_mut()
@@ -581,7 +581,7 @@ mod tests {
         let default = gb_inpaint::MethodConfig::load(gb_inpaint::run::DEFAULT_METHOD).unwrap();
         assert_eq!(score.name, SCORE_ORACLE);
         assert!(score.oracle.clean.unwrap().ends_with("scene/clean"));
-        assert_eq!(score.lambda_rgb, 1e-4);
+        assert_eq!(score.lambda_rgb.value(), 1e-4);
         assert_eq!(
             (score.lambda_normal, &score.normal, &score.visibility),
             (default.lambda_normal, &default.normal, &default.visibility)

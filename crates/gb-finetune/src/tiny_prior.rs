@@ -187,10 +187,13 @@ pub fn run_recipe(
         .join("vae")
         .join("diffusion_pytorch_model.safetensors");
     let (vae_losses, vae_json) = if resume && vae_done.is_file() {
-        let log: Vec<f64> = std::fs::read_to_string(vae_dir.join("losses.json"))
-            .ok()
-            .and_then(|t| serde_json::from_str(&t).ok())
-            .unwrap_or_default();
+        let log_path = vae_dir.join("losses.json");
+        let text =
+            std::fs::read_to_string(&log_path).map_err(|e| FinetuneError::io(&log_path, e))?;
+        let log: Vec<f64> = serde_json::from_str(&text).map_err(|e| FinetuneError::Invalid {
+            path: log_path.clone(),
+            message: format!("not a list of losses: {e}"),
+        })?;
         let json: serde_json::Value = serde_json::from_str(
             &std::fs::read_to_string(vae_dir.join("vae/config.json"))
                 .map_err(|e| FinetuneError::io(vae_dir.join("vae/config.json"), e))?,

@@ -6,8 +6,10 @@
 //! `L = L_rgb(unmasked) + 0.1 L_depth(unmasked) + lambda_rgb L_rgb_guidance(mask) + lambda_normal L_normal_guidance(mask)`
 //!
 //! - [`method`]: the method configurations (`configs/methods/*.toml`: gb-nerf,
-//!   gb-nerf-unseen, bsd, mvip-nerf, spin-nerf-sds, csd, none, pre-inpainted), prompts, and
-//!   how lambda maps to the paper's scale;
+//!   gb-nerf-unseen, gb-nerf-auto, bsd, mvip-nerf, spin-nerf-sds, csd, none, pre-inpainted),
+//!   prompts, and how lambda maps to the paper's scale;
+//! - [`auto`]: `lambda_rgb` / `lambda_normal = "auto"`, weights each scene picks for itself
+//!   on a pseudo-hole that no training view sees;
 //! - [`prior`]: loading the prior folder and attaching a LoRA;
 //! - [`personalize`]: the per-scene LoRA, fine-tuned on the scene's unmasked pixels before
 //!   guidance starts;
@@ -35,6 +37,7 @@
 //! [`run::run`].
 
 pub mod ablate;
+pub mod auto;
 pub mod crop;
 pub mod error;
 pub mod export;

@@ -70,6 +70,8 @@ use std::path::Path;
 use gb_diffusion::distill::{DistillSettings, PriorInputMode};
 use serde::{Deserialize, Serialize};
 
+use crate::auto::AutoSettings;
+pub use crate::auto::Weight;
 use crate::error::InpaintError;
 use crate::visibility::VisibilityConfig;
 
@@ -82,6 +84,10 @@ pub const BUILTIN_METHODS: &[(&str, &str)] = &[
     (
         "gb-nerf-unseen",
         include_str!("../../../configs/methods/gb-nerf-unseen.toml"),
+    ),
+    (
+        "gb-nerf-auto",
+        include_str!("../../../configs/methods/gb-nerf-auto.toml"),
     ),
     ("bsd", include_str!("../../../configs/methods/bsd.toml")),
     (
@@ -229,12 +235,14 @@ pub struct MethodConfig {
     /// of masking (the SPIn-NeRF + LaMa baseline); see [`crate::pre_inpainted`].
     #[serde(default)]
     pub pre_inpainted: bool,
-    /// Weight of the RGB guidance (paper's lambda2 = 1e-4).
+    /// Weight of the RGB guidance (paper's lambda2 = 1e-4), or `"auto"`: chosen per scene
+    /// from `[auto] rgb` ([`crate::auto`]).
     #[serde(default = "default_lambda")]
-    pub lambda_rgb: f64,
-    /// Weight of the normal-map guidance (paper's lambda3 = 1e-4).
+    pub lambda_rgb: Weight,
+    /// Weight of the normal-map guidance (paper's lambda3 = 1e-4), or `"auto"` (`[auto]
+    /// normal`).
     #[serde(default = "default_lambda")]
-    pub lambda_normal: f64,
+    pub lambda_normal: Weight,
     /// First step of the normal guidance, counted out of `reference_steps` (reference: 500
     /// of 10000); a run of `N` steps starts it at `normal_start_step * N / reference_steps`.
     #[serde(default = "default_normal_start")]
@@ -309,10 +317,14 @@ pub struct MethodConfig {
         skip_serializing_if = "crate::oracle::OracleSettings::is_default"
     )]
     pub oracle: crate::oracle::OracleSettings,
+    /// The candidates and trials of the `"auto"` weights ([`crate::auto`]). Left out of the
+    /// written config while it is the default.
+    #[serde(default, skip_serializing_if = "AutoSettings::is_default")]
+    pub auto: AutoSettings,
 }
 
-fn default_lambda() -> f64 {
-    1e-4
+fn default_lambda() -> Weight {
+    Weight::Fixed(1e-4)
 }
 fn default_normal_start() -> usize {
     500
@@ -387,14 +399,19 @@ impl MethodConfig {
 
     /// Checks every field that can be checked without a prior or a scene.
     pub fn validate(&self) -> Result<(), String> {
-        for (name, v) in [
+        for (name, w) in [
             ("lambda_rgb", self.lambda_rgb),
             ("lambda_normal", self.lambda_normal),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("{name} = {v} must be a finite number >= 0"));
+            if let Weight::Fixed(v) = w {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(format!(
+                        "{name} = {v} must be a finite number >= 0 or \"auto\""
+                    ));
+                }
             }
         }
+        self.auto.check(self)?;
         if self.guide_every == 0 {
             return Err("guide_every must be >= 1".into());
         }
@@ -552,7 +569,10 @@ mod tests {
             gb.normal.as_ref().unwrap().guidance,
             GuidanceMethod::Bsd { w1: 1.5, w2: 0.5 }
         );
-        assert_eq!((gb.lambda_rgb, gb.lambda_normal), (1e-4, 1e-4));
+        assert_eq!(
+            (gb.lambda_rgb, gb.lambda_normal),
+            (Weight::Fixed(1e-4), Weight::Fixed(1e-4))
+        );
         assert_eq!(gb.normal_start_for(10_000), 500);
         assert_eq!(gb.normal_start_for(400), 20);
         assert_eq!(gb.normal_start_for(3), 0);

@@ -369,6 +369,27 @@ impl GuidedTrainer {
         )
     }
 
+    /// [`Self::new`], with the pixels under `withheld` (one mask per training view, at the
+    /// training resolution) kept from every loss (gb-nerf's `Trainer::withhold`): the
+    /// pseudo-holes of [`crate::auto`].
+    pub fn new_withholding(
+        scene: &Scene,
+        config: NerfConfig,
+        method: MethodConfig,
+        guidance: Option<(GuidancePrior, Prompts)>,
+        backend: BackendKind,
+        withheld: &[Option<gb_nerf::scene::Mask>],
+    ) -> Result<Self, InpaintError> {
+        let mut nerf = Trainer::new(scene, config, backend)?;
+        nerf.withhold(withheld)?;
+        Self::from_base(nerf, scene, method, guidance)
+    }
+
+    /// The prior, handed back when the trainer is done with it.
+    pub fn into_prior(self) -> Option<GuidancePrior> {
+        self.guidance.map(|g| g.prior)
+    }
+
     /// Restores a trainer from a checkpoint of the same scene (parameters, Adam state,
     /// occupancy grid, step, random stream, counters, visibility maps); the preset stored in
     /// the checkpoint is used, with `steps` overriding its step count when given. Refuses a
@@ -494,6 +515,12 @@ impl GuidedTrainer {
         method: MethodConfig,
         guidance: Option<(GuidancePrior, Prompts)>,
     ) -> Result<Self, InpaintError> {
+        if method.lambda_rgb.is_auto() || method.lambda_normal.is_auto() {
+            return Err(InpaintError::MethodConfig {
+                path: PathBuf::from(&method.name),
+                reason: "a weight is still \"auto\": choose it first (gb_inpaint::auto)".into(),
+            });
+        }
         let identity = resume::identity(
             &method,
             guidance.as_ref().map(|(p, prompts)| (&p.info, prompts)),
@@ -802,8 +829,14 @@ impl GuidedTrainer {
         let normal_start = self.normal_start();
         let unobserved_mask = self.conditioning_mask(view)?;
         let (lambda, chain) = match modality {
-            Modality::Rgb => (self.method.lambda_rgb, self.method.reference_chain_rule),
-            Modality::Normal => (self.method.lambda_normal, self.method.reference_chain_rule),
+            Modality::Rgb => (
+                self.method.lambda_rgb.value(),
+                self.method.reference_chain_rule,
+            ),
+            Modality::Normal => (
+                self.method.lambda_normal.value(),
+                self.method.reference_chain_rule,
+            ),
         };
         let g = self
             .guidance
@@ -887,9 +920,10 @@ impl GuidedTrainer {
         if vis.enabled() && vis.observed_weight == 0.0 && step < self.visibility_start() {
             return Ok((outs, records));
         }
-        let do_rgb = g.rgb.is_some() && self.method.lambda_rgb > 0.0;
-        let do_normal =
-            g.normal.is_some() && self.method.lambda_normal > 0.0 && step >= self.normal_start();
+        let do_rgb = g.rgb.is_some() && self.method.lambda_rgb.value() > 0.0;
+        let do_normal = g.normal.is_some()
+            && self.method.lambda_normal.value() > 0.0
+            && step >= self.normal_start();
         if !(do_rgb || do_normal) || g.views.is_empty() {
             return Ok((outs, records));
         }

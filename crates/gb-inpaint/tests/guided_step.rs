@@ -148,7 +148,7 @@ fn the_injected_gradient_is_lambda_times_the_encoder_vjp_and_reaches_the_field_t
     let dir = tempfile::tempdir().unwrap();
     let s = scene(dir.path());
     let mut t = guided(&s, dir.path(), "bsd", |m| {
-        m.lambda_rgb = 0.37;
+        m.lambda_rgb = 0.37.into();
         m.prior_input = PriorInputMode::PasteOnGroundTruth;
     });
     let view = t.guidance.as_ref().unwrap().views[0];
@@ -493,7 +493,7 @@ fn an_oracle_score_pulls_to_the_object_free_crop_whatever_the_noise() {
     let s = scene(dir.path());
     let clean_dir = dir.path().join("clean");
     let mut t = guided(&s, dir.path(), "bsd", |m| {
-        m.lambda_rgb = 1.0;
+        m.lambda_rgb = 1.0.into();
         m.prior_input = PriorInputMode::PasteOnGroundTruth;
         m.rgb.as_mut().unwrap().guidance = GuidanceMethod::Sds {
             guidance_scale: 1.0,
@@ -555,8 +555,8 @@ fn appearance_only_rgb_guidance_leaves_the_geometry_alone() {
     let dir = tempfile::tempdir().unwrap();
     let s = scene(dir.path());
     let mut t = guided(&s, dir.path(), "gb-nerf", |m| {
-        m.lambda_rgb = 1.0;
-        m.lambda_normal = 1.0;
+        m.lambda_rgb = 1.0.into();
+        m.lambda_normal = 1.0.into();
         m.rgb_moves_geometry = false;
     });
     let view = t.guidance.as_ref().unwrap().views[0];

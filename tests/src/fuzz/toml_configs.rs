@@ -124,8 +124,8 @@ pub fn method(h: &mut Harness) -> Result<(), String> {
         if let Case::Values(i, n, x) = case {
             let mut cfg = MethodConfig::from_toml(texts[i % texts.len()], origin)
                 .map_err(|e| TestCaseError::fail(e.to_string()))?;
-            cfg.lambda_rgb = x[0];
-            cfg.lambda_normal = x[1];
+            cfg.lambda_rgb = x[0].into();
+            cfg.lambda_normal = x[1].into();
             cfg.crop_margin = (x[2] * 4.0) as f32;
             cfg.guide_every = 1 + n[0] as usize;
             cfg.reference_steps = 1 + n[1] as usize;

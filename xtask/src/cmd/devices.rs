@@ -12,12 +12,15 @@ pub struct Args {
 }
 
 /// Runs a small matrix product on each backend and prints the result, the time, the prior's
-/// default precision there, and wgpu's shader compiler.
+/// default precision there, and wgpu's shader compiler. Fails (non-zero exit) when a checked
+/// backend is unavailable or computes a wrong result, so that scripts (`bench gpu`'s SPIR-V
+/// check) can rely on the status.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let kinds = match args.device {
         Some(k) => vec![k],
         None => BackendKind::ALL.to_vec(),
     };
+    let mut failed = Vec::new();
     for kind in kinds {
         let start = std::time::Instant::now();
         let outcome = std::panic::catch_unwind(|| {
@@ -36,9 +39,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     println!("         shaders: {}", gb_bench::gpu::WGPU_COMPILER);
                 }
             }
-            Ok((s, _)) => println!("{kind:8} WRONG result {s}"),
-            Err(_) => println!("{kind:8} unavailable (see the log above)"),
+            Ok((s, _)) => {
+                println!("{kind:8} WRONG result {s}");
+                failed.push(format!("{kind} (wrong result {s})"));
+            }
+            Err(_) => {
+                println!("{kind:8} unavailable (see the log above)");
+                failed.push(format!("{kind} (unavailable)"));
+            }
         }
+    }
+    if !failed.is_empty() {
+        anyhow::bail!("backends that do not work here: {}", failed.join(", "));
     }
     Ok(())
 }

@@ -276,6 +276,39 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         &references,
         &mut prior,
     )?;
+    let oracle_images = method
+        .oracle
+        .clean
+        .as_deref()
+        .map(|dir| {
+            crate::oracle::load_object_free(
+                &scene,
+                dir,
+                config.train.image_downscale,
+                "[oracle] clean",
+            )
+        })
+        .transpose()?;
+    let auto = if crate::auto::has_auto(&method) {
+        let report = crate::auto::choose_weights(
+            &crate::auto::AutoInputs {
+                scene: &scene,
+                method: &method,
+                config: &config,
+                prompts: &prompts,
+                oracle: oracle_images.as_deref(),
+                backend: device,
+                weights: spec.weights.clone(),
+                out,
+                progress: spec.progress,
+            },
+            &mut prior,
+        )?;
+        report.apply(&mut method);
+        Some(report)
+    } else {
+        None
+    };
     let prior_info = prior.as_ref().map(|p| p.info.clone());
     let ckpt = out.join("checkpoint.bin");
     let resuming = spec.resume && ckpt.is_file();
@@ -301,13 +334,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         );
     }
     trainer.set_references(references);
-    if let Some(dir) = method.oracle.clean.as_deref() {
-        let images = crate::oracle::load_object_free(
-            &scene,
-            dir,
-            trainer.config.train.image_downscale,
-            "[oracle] clean",
-        )?;
+    if let Some(images) = oracle_images {
         tracing::warn!(
             views = images.iter().flatten().count(),
             branches = ?method.oracle.branches,
@@ -404,6 +431,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
             seconds: o.seconds,
         }),
         personalize: personalized,
+        auto,
         samples_per_ray: trainer.config.sampler.samples_per_ray,
         mean_train_evaluations_per_ray: fit.mean_evaluations_per_ray,
         guidance: GuidanceSummary {

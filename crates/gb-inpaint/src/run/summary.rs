@@ -136,6 +136,10 @@ pub struct RunSummary {
     /// The per-scene LoRA, when the method personalises the prior.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub personalize: Option<crate::personalize::PersonalizeReport>,
+    /// The weights the scene chose (`lambda_rgb` / `lambda_normal = "auto"`): pseudo-hole,
+    /// trials, scores and choice ([`crate::auto`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub auto: Option<crate::auto::AutoReport>,
     /// Number of test views.
     pub test_views: usize,
     /// Means over the test views.

@@ -236,4 +236,28 @@ impl TrainData {
             sparse,
         })
     }
+
+    /// Withholds the pixels under `masks` (one per training view, at the training resolution;
+    /// `None`: nothing withheld there) from every loss: they leave the pool of colour and
+    /// depth rays, and the sparse points that project there are dropped. The views' own
+    /// masks, and so the guidance, are unchanged. Errors when no trainable pixel remains.
+    pub fn withhold(&mut self, masks: &[Option<Mask>]) -> Result<(), super::NerfError> {
+        let under = |view: u32, x: usize, y: usize| {
+            masks
+                .get(view as usize)
+                .and_then(Option::as_ref)
+                .is_some_and(|m| x < m.width && y < m.height && m.data[y * m.width + x])
+        };
+        self.pixels
+            .retain(|p| !under(p.view, p.x as usize, p.y as usize));
+        self.sparse
+            .retain(|p| !under(p.view, p.x as usize, p.y as usize));
+        if self.pixels.is_empty() {
+            return Err(super::NerfError::Scene {
+                scene: "withheld".into(),
+                reason: "no training pixel outside the masks and the withheld regions".into(),
+            });
+        }
+        Ok(())
+    }
 }

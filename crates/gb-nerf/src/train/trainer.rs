@@ -23,7 +23,7 @@ use crate::render::image::{render_image, ImageRender, ImageSettings};
 use crate::render::rays::camera_rays;
 use crate::render::{render_rays, Background};
 use crate::sampler::{normalized_positions, sample_rays, OccupancyGrid, RayBatch, SceneSpace};
-use crate::scene::{Camera, Scene};
+use crate::scene::{Camera, Mask, Scene};
 
 /// Loss and quality of one training step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -221,6 +221,20 @@ impl Trainer {
 
     /// The reconstruction loss of one batch of unmasked training rays (RGB MSE, plus
     /// `depth_weight` times the disparity loss where depth exists), with its autodiff graph.
+    /// Withholds the pixels under `masks` from every loss ([`TrainData::withhold`]), e.g. a
+    /// pseudo-hole that no view may see; call it before the first step. The checkpoint's data
+    /// fingerprint follows.
+    pub fn withhold(&mut self, masks: &[Option<Mask>]) -> Result<(), NerfError> {
+        self.data.withhold(masks)?;
+        let mut h = checkpoint::data_fingerprint(&self.data);
+        for p in &self.data.pixels {
+            h = (h ^ ((p.view as u64) << 40 | (p.y as u64) << 20 | p.x as u64))
+                .wrapping_mul(0x0000_0100_0000_01b3);
+        }
+        self.data_fingerprint = h;
+        Ok(())
+    }
+
     /// Draws from the trainer's random stream; [`Self::apply_loss`] completes the step.
     pub fn reconstruction_loss(&mut self) -> ReconstructionLoss {
         let n = self.config.train.rays_per_batch;

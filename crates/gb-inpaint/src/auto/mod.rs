@@ -1,0 +1,615 @@
+//! Guidance weights each scene picks for itself: `lambda_rgb = "auto"`,
+//! `lambda_normal = "auto"`.
+//!
+//! A user of the paper's code tunes the guidance scale per scene by eye. Here the scene's own
+//! data decides, before the guided run:
+//!
+//! 1. a **pseudo-hole** is placed on observed background away from the object
+//!    ([`pseudo_hole`]): a cube whose image is withheld from the colour, depth and
+//!    sparse-point losses of every training view, so no view sees it, like the real hole;
+//! 2. one short **trial** per candidate (the product of `[auto] rgb` and `[auto] normal` over
+//!    the weights that are `"auto"`; the others keep their value) trains the method on the
+//!    scene with the object's masks withheld too and the pseudo-hole as the guided hole;
+//! 3. each trial is **scored** on the withheld pixels of the training views, whose truth the
+//!    training images hold: mask-box SSIM, ST-LPIPS and D-PSNR (D-PSNR only where the scene
+//!    has depth maps), each candidate ranked per metric, the lowest rank sum winning
+//!    (`tools/diag/rank_methods.py`'s rule); a tie goes to the smaller total weight, so that
+//!    a scene gets guidance only on evidence ("model only what a scene requires").
+//!
+//! The pseudo-hole, every trial's scores and the choice go into `metrics.json`'s `auto`, and
+//! are cached in `OUT/auto/choice.json`, keyed by the contents of the scene's training views,
+//! the method, the preset, the prior (and LoRAs) and the oracle: a resumed or repeated run
+//! reuses the choice. With an `[oracle]`, the trials' guidance is the oracle's too (its
+//! object-free images are the truth of the pseudo-hole as well).
+//!
+//! ```toml
+//! lambda_rgb = "auto"
+//! lambda_normal = "auto"
+//! [auto]
+//! rgb = [0.0, 1e-5]      # candidates (default)
+//! normal = [0.0, 1e-5]
+//! trial_steps = 0.5      # a trial's steps, as a fraction of the run's
+//! hole_scale = 1.0       # the pseudo-hole's side, as a multiple of the mask's
+//! ```
+
+pub mod pseudo_hole;
+mod weight;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use gb_core::{BackendKind, RgbImage};
+use gb_eval::report::Outcome;
+use gb_eval::suite::{evaluate, EvalPair, PairSet, Selection, SuiteOptions};
+use gb_nerf::render::rays::crop_camera;
+use gb_nerf::scene::{Mask, Scene, Split};
+use gb_nerf::train::data::{downscale_mask, prepare_view};
+use gb_nerf::train::NerfConfig;
+use serde::{Deserialize, Serialize};
+
+pub use pseudo_hole::PseudoHole;
+pub use weight::Weight;
+
+use crate::error::InpaintError;
+use crate::method::{MethodConfig, Prompts};
+use crate::prior::GuidancePrior;
+use crate::run::disparity_map;
+use crate::trainer::{FitOptions, GuidedTrainer};
+
+/// The cache's folder in the run folder.
+pub const FOLDER: &str = "auto";
+
+/// `[auto]` of a method (module docs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AutoSettings {
+    /// Candidates of `lambda_rgb` when it is `"auto"`.
+    pub rgb: Vec<f64>,
+    /// Candidates of `lambda_normal` when it is `"auto"`.
+    pub normal: Vec<f64>,
+    /// A trial's steps, as a fraction of the run's (at least one step).
+    pub trial_steps: f64,
+    /// The pseudo-hole's side, as a multiple of the object mask's.
+    pub hole_scale: f32,
+}
+
+impl Default for AutoSettings {
+    fn default() -> Self {
+        Self {
+            rgb: vec![0.0, 1e-5],
+            normal: vec![0.0, 1e-5],
+            trial_steps: 0.5,
+            hole_scale: 1.0,
+        }
+    }
+}
+
+impl AutoSettings {
+    /// Whether these are the default settings.
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Checks the settings against `method`'s weights.
+    pub fn check(&self, method: &MethodConfig) -> Result<(), String> {
+        for (name, list, weight, guided) in [
+            ("rgb", &self.rgb, method.lambda_rgb, method.rgb.is_some()),
+            (
+                "normal",
+                &self.normal,
+                method.lambda_normal,
+                method.normal.is_some(),
+            ),
+        ] {
+            if list.is_empty() {
+                return Err(format!("[auto] {name} must list at least one weight"));
+            }
+            if let Some(v) = list.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+                return Err(format!("[auto] {name}: {v} is not a finite number >= 0"));
+            }
+            if weight.is_auto() && !guided {
+                return Err(format!(
+                    "lambda_{name} = \"auto\" but the method has no [{name}] guidance"
+                ));
+            }
+        }
+        if !(self.trial_steps.is_finite() && self.trial_steps > 0.0 && self.trial_steps <= 1.0) {
+            return Err(format!(
+                "[auto] trial_steps = {} must be in (0, 1]",
+                self.trial_steps
+            ));
+        }
+        if !(self.hole_scale.is_finite() && self.hole_scale > 0.0 && self.hole_scale <= 4.0) {
+            return Err(format!(
+                "[auto] hole_scale = {} must be in (0, 4]",
+                self.hole_scale
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Whether `method` has a weight to choose.
+pub fn has_auto(method: &MethodConfig) -> bool {
+    method.lambda_rgb.is_auto() || method.lambda_normal.is_auto()
+}
+
+/// One trial's weights and scores.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Trial {
+    /// Its `lambda_rgb`.
+    pub lambda_rgb: f64,
+    /// Its `lambda_normal`.
+    pub lambda_normal: f64,
+    /// Mask-box SSIM over the withheld pixels' boxes (mean over views).
+    pub ssim_bbox: Option<f64>,
+    /// Mask-box ST-LPIPS.
+    pub lpips_bbox: Option<f64>,
+    /// Mask-box D-PSNR (scenes with depth maps).
+    pub d_psnr_bbox: Option<f64>,
+    /// Its rank sum over the ranked metrics (lower is better).
+    pub rank_sum: f64,
+    /// Wall time, seconds.
+    pub seconds: f64,
+}
+
+/// What the choice did (`metrics.json`'s `auto`, and the cache file).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AutoReport {
+    /// The pseudo-hole.
+    pub hole: PseudoHole,
+    /// Training views that the pseudo-hole shows in (all withheld there).
+    pub withheld_views: usize,
+    /// Withheld pixels over those views, at the training resolution.
+    pub withheld_pixels: usize,
+    /// Steps of each trial.
+    pub trial_steps: usize,
+    /// The metrics that ranked the trials.
+    pub ranked_by: Vec<String>,
+    /// Every trial, in grid order.
+    pub trials: Vec<Trial>,
+    /// The chosen `lambda_rgb`.
+    pub lambda_rgb: f64,
+    /// The chosen `lambda_normal`.
+    pub lambda_normal: f64,
+    /// Wall time of the trials, seconds (of the run that ran them).
+    pub seconds: f64,
+    /// Whether this run reused the cache.
+    pub cached: bool,
+}
+
+impl AutoReport {
+    /// `method` with the chosen weights in place of `"auto"`.
+    pub fn apply(&self, method: &mut MethodConfig) {
+        if method.lambda_rgb.is_auto() {
+            method.lambda_rgb = Weight::Fixed(self.lambda_rgb);
+        }
+        if method.lambda_normal.is_auto() {
+            method.lambda_normal = Weight::Fixed(self.lambda_normal);
+        }
+    }
+}
+
+/// Everything the choice needs.
+pub struct AutoInputs<'a> {
+    /// The scene (with its real masks).
+    pub scene: &'a Scene,
+    /// The method, with its `"auto"` weights.
+    pub method: &'a MethodConfig,
+    /// The run's preset.
+    pub config: &'a NerfConfig,
+    /// The run's prompts.
+    pub prompts: &'a Prompts,
+    /// The oracle's object-free images per training view (training resolution), if the
+    /// method has an `[oracle]`.
+    pub oracle: Option<&'a [Option<RgbImage>]>,
+    /// The backend.
+    pub backend: BackendKind,
+    /// The metric weights folder (ST-LPIPS).
+    pub weights: Option<PathBuf>,
+    /// The run folder (the cache lives in `OUT/auto/`).
+    pub out: &'a Path,
+    /// Show progress bars.
+    pub progress: bool,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct CacheKey {
+    scene: String,
+    method: String,
+    preset: String,
+    prior: Option<String>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct CacheFile {
+    key: CacheKey,
+    report: AutoReport,
+}
+
+fn auto_err(reason: String) -> InpaintError {
+    InpaintError::Spec {
+        field: "lambda_rgb / lambda_normal = \"auto\"".into(),
+        reason,
+    }
+}
+
+/// The cache key of a choice (module docs).
+fn cache_key(i: &AutoInputs, prior: Option<&GuidancePrior>) -> Result<CacheKey, InpaintError> {
+    let mut h = gb_core::fingerprint::Fnv64::default();
+    for v in i.scene.split(Split::Train) {
+        h.bytes(v.name.as_bytes());
+        v.image.data.iter().for_each(|f| h.word(f.to_bits() as u64));
+        if let Some(m) = &v.mask {
+            m.data.iter().for_each(|b| h.word(*b as u64 + 2));
+        }
+        v.camera
+            .c2w
+            .iter()
+            .flatten()
+            .for_each(|f| h.word(f.to_bits() as u64));
+    }
+    let prior = match prior {
+        None => None,
+        Some(p) => {
+            let mut ph = gb_core::fingerprint::Fnv64::default();
+            let mut files = vec![p.info.folder.clone()];
+            files.extend(p.info.lora.clone());
+            files.extend(p.info.personal_lora.clone());
+            for f in files {
+                let c = gb_core::fingerprint::contents(&f).map_err(|e| InpaintError::io(&f, e))?;
+                ph.word(c);
+            }
+            Some(format!("{:016x}", ph.finish()))
+        }
+    };
+    Ok(CacheKey {
+        scene: format!("{:016x}", h.finish()),
+        method: toml_text(i.method),
+        preset: toml_text(i.config),
+        prior,
+    })
+}
+
+/// A config as TOML text (for cache keys).
+fn toml_text<T: Serialize>(v: &T) -> String {
+    toml::to_string(v).unwrap_or_else(|e| format!("unserialisable: {e}"))
+}
+
+/// The grid: every `"auto"` weight over its candidates, the others fixed.
+fn grid(method: &MethodConfig) -> Vec<(f64, f64)> {
+    let s = &method.auto;
+    let options = |w: Weight, list: &[f64]| match w {
+        Weight::Auto => list.to_vec(),
+        Weight::Fixed(v) => vec![v],
+    };
+    let rgb = options(method.lambda_rgb, &s.rgb);
+    let normal = options(method.lambda_normal, &s.normal);
+    rgb.iter()
+        .flat_map(|r| normal.iter().map(move |n| (*r, *n)))
+        .collect()
+}
+
+/// Chooses the `"auto"` weights of `i.method` (module docs), or reads the choice from the
+/// cache. `prior` is lent to the trials and handed back.
+pub fn choose_weights(
+    i: &AutoInputs,
+    prior: &mut Option<GuidancePrior>,
+) -> Result<AutoReport, InpaintError> {
+    let key = cache_key(i, prior.as_ref())?;
+    let dir = i.out.join(FOLDER);
+    let path = dir.join("choice.json");
+    if let Some(cached) = std::fs::read_to_string(&path)
+        .ok()
+        .and_then(|t| serde_json::from_str::<CacheFile>(&t).ok())
+        .filter(|c| c.key == key)
+    {
+        tracing::info!(
+            lambda_rgb = cached.report.lambda_rgb,
+            lambda_normal = cached.report.lambda_normal,
+            "auto weights: reusing the cached choice"
+        );
+        return Ok(AutoReport {
+            cached: true,
+            ..cached.report
+        });
+    }
+    let started = Instant::now();
+    let hole = pseudo_hole::place(i.scene, i.method.auto.hole_scale).map_err(auto_err)?;
+    let f = i.config.train.image_downscale.max(1);
+    let holes = pseudo_hole::withheld(i.scene, &hole);
+    // the trial scene: the pseudo-hole is the guided hole, the object's masks are withheld
+    let mut trial_scene = i.scene.clone();
+    let mut objects = Vec::new();
+    let train_views = trial_scene
+        .views
+        .iter_mut()
+        .filter(|v| v.split == Split::Train);
+    for (v, m) in train_views.zip(&holes) {
+        objects.push(v.mask.as_ref().map(|m| downscale_mask(m, f)));
+        v.mask = m.clone();
+    }
+    let scored: Vec<(usize, Mask)> = holes
+        .iter()
+        .enumerate()
+        .filter_map(|(k, m)| Some((k, downscale_mask(m.as_ref()?, f))))
+        .collect();
+    let withheld_pixels = scored
+        .iter()
+        .map(|(_, m)| m.data.iter().filter(|b| **b).count())
+        .sum();
+    let steps = ((i.config.train.steps as f64 * i.method.auto.trial_steps).round() as usize).max(1);
+    tracing::info!(
+        ?hole,
+        views = scored.len(),
+        pixels = withheld_pixels,
+        trial_steps = steps,
+        "auto weights: pseudo-hole placed"
+    );
+    let mut trials = Vec::new();
+    for (lambda_rgb, lambda_normal) in grid(i.method) {
+        let t0 = Instant::now();
+        let scores = trial(
+            i,
+            &trial_scene,
+            &objects,
+            &scored,
+            (lambda_rgb, lambda_normal),
+            steps,
+            prior,
+        )?;
+        let seconds = t0.elapsed().as_secs_f64();
+        tracing::info!(
+            lambda_rgb,
+            lambda_normal,
+            ?scores,
+            seconds,
+            "auto weights: trial"
+        );
+        trials.push(Trial {
+            lambda_rgb,
+            lambda_normal,
+            ssim_bbox: scores[0],
+            lpips_bbox: scores[1],
+            d_psnr_bbox: scores[2],
+            rank_sum: 0.0,
+            seconds,
+        });
+    }
+    let ranked_by = rank(&mut trials);
+    let best = best_trial(&trials);
+    let report = AutoReport {
+        hole,
+        withheld_views: scored.len(),
+        withheld_pixels,
+        trial_steps: steps,
+        ranked_by,
+        lambda_rgb: trials[best].lambda_rgb,
+        lambda_normal: trials[best].lambda_normal,
+        trials,
+        seconds: started.elapsed().as_secs_f64(),
+        cached: false,
+    };
+    tracing::info!(
+        lambda_rgb = report.lambda_rgb,
+        lambda_normal = report.lambda_normal,
+        "auto weights: chosen"
+    );
+    std::fs::create_dir_all(&dir).map_err(|e| InpaintError::io(&dir, e))?;
+    let text = serde_json::to_vec_pretty(&CacheFile {
+        key,
+        report: report.clone(),
+    })
+    .map_err(|e| InpaintError::io(&path, std::io::Error::other(e)))?;
+    gb_core::atomic::write_atomic(&path, &text).map_err(|e| InpaintError::io(&path, e))?;
+    Ok(report)
+}
+
+/// The metrics a trial is scored on, and whether higher is better.
+const METRICS: [(&str, bool); 3] = [
+    ("ssim_bbox", true),
+    ("lpips_bbox", false),
+    ("d_psnr_bbox", true),
+];
+
+/// One trial: trains and scores `weights` on the trial scene; the prior is lent and handed
+/// back. Returns the [`METRICS`] means (`None` where unavailable).
+fn trial(
+    i: &AutoInputs,
+    trial_scene: &Scene,
+    objects: &[Option<Mask>],
+    scored: &[(usize, Mask)],
+    weights: (f64, f64),
+    steps: usize,
+    prior: &mut Option<GuidancePrior>,
+) -> Result<[Option<f64>; 3], InpaintError> {
+    let mut method = i.method.clone();
+    method.lambda_rgb = Weight::Fixed(weights.0);
+    method.lambda_normal = Weight::Fixed(weights.1);
+    method.personalize = Default::default();
+    method.reference = Default::default();
+    let mut config = i.config.clone();
+    config.train.steps = steps;
+    let guidance = if method.needs_prior() {
+        let p = prior.take().ok_or_else(|| InpaintError::PriorRequired {
+            method: method.name.clone(),
+        })?;
+        Some((p, i.prompts.clone()))
+    } else {
+        None
+    };
+    let result =
+        GuidedTrainer::new_withholding(trial_scene, config, method, guidance, i.backend, objects);
+    let mut t = result?;
+    if let (Some(images), Some(_)) = (i.oracle, i.method.oracle.clean.as_ref()) {
+        t.set_oracle(crate::oracle::OracleTargets::new(
+            images.to_vec(),
+            i.method.oracle.branches.clone(),
+        ));
+    }
+    let fitted = t.fit(&FitOptions {
+        checkpoint: None,
+        log: None,
+        append_log: false,
+        progress: i.progress,
+    });
+    let scores = fitted.and_then(|_| score(i, &t, scored));
+    *prior = t.into_prior().or(prior.take());
+    scores
+}
+
+/// The [`METRICS`] of `t`'s renders of the training views over their withheld pixels (the
+/// box of each view's withheld pixels, rendered alone).
+fn score(
+    i: &AutoInputs,
+    t: &GuidedTrainer,
+    scored: &[(usize, Mask)],
+) -> Result<[Option<f64>; 3], InpaintError> {
+    let train: Vec<_> = i.scene.split(Split::Train).collect();
+    let f = t.config.train.image_downscale;
+    let mut pairs = Vec::new();
+    for (k, mask) in scored {
+        let v = prepare_view(train[*k], f);
+        // only the withheld pixels' box is rendered: the metrics cover nothing else
+        let Some(bbox) = mask.bbox() else { continue };
+        let (x0, y0, x1, y1) = bbox;
+        let (w, h) = (x1 - x0, y1 - y0);
+        let r = t.render(&crop_camera(&v.camera, bbox, w, h))?;
+        let cut = |width: usize, c: usize| -> Vec<usize> {
+            (y0..y1)
+                .flat_map(|y| {
+                    (x0..x1).flat_map(move |x| (0..c).map(move |i| (y * width + x) * c + i))
+                })
+                .collect()
+        };
+        let gt = RgbImage {
+            width: w,
+            height: h,
+            data: cut(v.image.width, 3)
+                .into_iter()
+                .map(|i| v.image.data[i])
+                .collect(),
+        };
+        let pixels = cut(v.image.width, 1);
+        pairs.push(EvalPair {
+            name: train[*k].name.clone(),
+            gt: Some(gt),
+            mask: Some(pixels.iter().map(|i| mask.data[*i]).collect()),
+            disparity: v.depth.as_ref().map(|d| {
+                let truth: Vec<f32> = pixels.iter().map(|i| d[*i]).collect();
+                (disparity_map(&r.depth, w, h), disparity_map(&truth, w, h))
+            }),
+            pred: r.rgb,
+        });
+    }
+    let opts = SuiteOptions {
+        metrics: Selection::Only(vec!["ssim".into(), "lpips".into(), "d_psnr".into()]),
+        ..SuiteOptions::new(i.weights.clone(), i.backend)
+    };
+    let report = evaluate(&PairSet::new(&pairs), &opts)?;
+    Ok(METRICS.map(|(k, _)| match report.values.get(k) {
+        Some(Outcome::Value(v)) if v.is_finite() => Some(*v),
+        other => {
+            tracing::debug!(metric = k, ?other, "auto weights: metric not ranked");
+            None
+        }
+    }))
+}
+
+/// Ranks the trials per metric that every trial has (1 best, ties sharing the mean rank),
+/// fills their rank sums and returns the metrics used.
+fn rank(trials: &mut [Trial]) -> Vec<String> {
+    let get = |t: &Trial, k: usize| [t.ssim_bbox, t.lpips_bbox, t.d_psnr_bbox][k];
+    let mut used = Vec::new();
+    for (k, (name, higher)) in METRICS.iter().enumerate() {
+        let values: Option<Vec<f64>> = trials.iter().map(|t| get(t, k)).collect();
+        let Some(values) = values else { continue };
+        used.push(name.to_string());
+        for (j, t) in trials.iter_mut().enumerate() {
+            let better = |o: f64| {
+                if *higher {
+                    o > values[j]
+                } else {
+                    o < values[j]
+                }
+            };
+            let ahead = values.iter().filter(|o| better(**o)).count() as f64;
+            let equal = values.iter().filter(|o| **o == values[j]).count() as f64;
+            t.rank_sum += ahead + (equal + 1.0) / 2.0;
+        }
+    }
+    used
+}
+
+/// The trial with the lowest rank sum; a tie goes to the smaller total weight.
+fn best_trial(trials: &[Trial]) -> usize {
+    let mut best = 0;
+    for (j, t) in trials.iter().enumerate().skip(1) {
+        let b = &trials[best];
+        let total = |t: &Trial| t.lambda_rgb + t.lambda_normal;
+        if t.rank_sum < b.rank_sum || (t.rank_sum == b.rank_sum && total(t) < total(b)) {
+            best = j;
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn trial(r: f64, n: f64, s: [Option<f64>; 3]) -> Trial {
+        Trial {
+            lambda_rgb: r,
+            lambda_normal: n,
+            ssim_bbox: s[0],
+            lpips_bbox: s[1],
+            d_psnr_bbox: s[2],
+            rank_sum: 0.0,
+            seconds: 0.0,
+        }
+    }
+
+    #[test]
+    fn the_lowest_rank_sum_wins_and_a_tie_goes_to_less_guidance() {
+        let mut t = vec![
+            trial(0.0, 0.0, [Some(0.5), Some(0.3), Some(20.0)]),
+            trial(1e-5, 0.0, [Some(0.6), Some(0.2), Some(19.0)]),
+            trial(1e-5, 1e-5, [Some(0.4), Some(0.4), Some(21.0)]),
+        ];
+        assert_eq!(rank(&mut t), vec!["ssim_bbox", "lpips_bbox", "d_psnr_bbox"]);
+        assert_eq!(
+            t.iter().map(|t| t.rank_sum).collect::<Vec<_>>(),
+            vec![6.0, 5.0, 7.0]
+        );
+        assert_eq!(best_trial(&t), 1);
+        // equal scores: shared ranks, and the smaller weight wins
+        let mut tie = vec![
+            trial(1e-5, 0.0, [Some(0.5), Some(0.3), None]),
+            trial(0.0, 0.0, [Some(0.5), Some(0.3), None]),
+        ];
+        assert_eq!(rank(&mut tie), vec!["ssim_bbox", "lpips_bbox"]);
+        assert_eq!(tie[0].rank_sum, 3.0);
+        assert_eq!(best_trial(&tie), 1);
+    }
+
+    #[test]
+    fn the_grid_spans_the_auto_weights_only() {
+        let mut m = MethodConfig::builtin("gb-nerf-unseen").unwrap();
+        m.lambda_rgb = Weight::Auto;
+        assert_eq!(grid(&m), vec![(0.0, 1e-5), (1e-5, 1e-5)]);
+        m.lambda_normal = Weight::Auto;
+        m.auto.normal = vec![0.0, 3e-5];
+        assert_eq!(grid(&m).len(), 4);
+        assert_eq!(grid(&m)[3], (1e-5, 3e-5));
+        m.auto.trial_steps = 0.0;
+        assert!(m.validate().unwrap_err().contains("trial_steps"));
+        let mut none = MethodConfig::builtin("bsd").unwrap();
+        none.normal = None;
+        none.lambda_normal = Weight::Auto;
+        assert!(none
+            .validate()
+            .unwrap_err()
+            .contains("no [normal] guidance"));
+    }
+}

@@ -1,0 +1,402 @@
+//! Pseudo-holes: boxes on observed background that the auto-weight trials withhold from
+//! every training view, so that they are hidden exactly like the real hole, yet their truth
+//! is known (the training images, and the depth where the scene has it).
+//!
+//! A pseudo-hole is a world-axis-aligned cube centred on a reconstructed surface point (the
+//! scene's sparse points, or its depth maps), sized so that its image in the masked views is
+//! about as large as the object's mask. Its withheld region in a view is every pixel whose
+//! ray crosses the cube in front of the camera, grown by one pixel: no training ray reaches
+//! any point inside it. It is placed only where, in every training view, its image keeps a
+//! margin from the object's mask (the real hole stays the real hole), and where at least
+//! half of the masked views (two at least) see it whole.
+
+use gb_nerf::scene::{Camera, Mask, Scene, Split, View};
+
+/// Candidate centres examined (an even subsample of the surface points).
+const MAX_CANDIDATES: usize = 600;
+/// The margin between a pseudo-hole's image and the object's mask, as a fraction of the
+/// pseudo-hole image's size.
+const MASK_MARGIN: f32 = 0.25;
+
+/// A withheld cube (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PseudoHole {
+    /// Minimum corner, world units.
+    pub min: [f32; 3],
+    /// Maximum corner.
+    pub max: [f32; 3],
+}
+
+impl PseudoHole {
+    /// The cube of half-side `half` around `centre`.
+    pub fn cube(centre: [f32; 3], half: f32) -> Self {
+        Self {
+            min: centre.map(|c| c - half),
+            max: centre.map(|c| c + half),
+        }
+    }
+
+    fn corners(&self) -> [[f32; 3]; 8] {
+        let (a, b) = (self.min, self.max);
+        std::array::from_fn(|i| {
+            [
+                if i & 1 == 0 { a[0] } else { b[0] },
+                if i & 2 == 0 { a[1] } else { b[1] },
+                if i & 4 == 0 { a[2] } else { b[2] },
+            ]
+        })
+    }
+
+    /// Whether `p` lies inside the cube.
+    pub fn contains(&self, p: [f32; 3]) -> bool {
+        (0..3).all(|i| p[i] >= self.min[i] && p[i] <= self.max[i])
+    }
+
+    /// Whether the ray `origin + t dir`, `t > 0`, crosses the cube (slab test).
+    pub fn hit(&self, origin: [f32; 3], dir: [f32; 3]) -> bool {
+        let (mut t0, mut t1) = (0.0f32, f32::INFINITY);
+        for i in 0..3 {
+            if dir[i].abs() < 1e-12 {
+                if origin[i] < self.min[i] || origin[i] > self.max[i] {
+                    return false;
+                }
+                continue;
+            }
+            let (a, b) = (
+                (self.min[i] - origin[i]) / dir[i],
+                (self.max[i] - origin[i]) / dir[i],
+            );
+            t0 = t0.max(a.min(b));
+            t1 = t1.min(a.max(b));
+        }
+        t0 <= t1
+    }
+
+    /// The bounding rectangle `(x0, y0, x1, y1)` (continuous pixels, unclipped) of the
+    /// cube's image in `camera`; `None` when a corner lies behind it.
+    pub fn image_rect(&self, camera: &Camera) -> Option<[f32; 4]> {
+        let mut r = [
+            f32::INFINITY,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NEG_INFINITY,
+        ];
+        for c in self.corners() {
+            let ([x, y], _) = camera.project(c)?;
+            r = [r[0].min(x), r[1].min(y), r[2].max(x), r[3].max(y)];
+        }
+        Some(r)
+    }
+
+    /// The withheld pixels of `camera`'s image: those whose ray (through the pixel centre)
+    /// crosses the cube, grown by one pixel (module docs).
+    pub fn mask(&self, camera: &Camera) -> Mask {
+        let (w, h) = (camera.width, camera.height);
+        let mut hit = vec![false; w * h];
+        let origin = camera.origin();
+        // only the pixels of the image rectangle can hit; a corner behind the camera: all
+        let (x0, y0, x1, y1) = match self.image_rect(camera) {
+            Some([a, b, c, d]) => (
+                (a.floor().max(0.0) as usize).min(w),
+                (b.floor().max(0.0) as usize).min(h),
+                (c.ceil().max(0.0) as usize).min(w),
+                (d.ceil().max(0.0) as usize).min(h),
+            ),
+            None => (0, 0, w, h),
+        };
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let d = camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5);
+                hit[y * w + x] = self.hit(origin, d);
+            }
+        }
+        let mut data = hit.clone();
+        for y in 0..h {
+            for x in 0..w {
+                if hit[y * w + x] {
+                    for (dx, dy) in [
+                        (-1i64, 0i64),
+                        (1, 0),
+                        (0, -1),
+                        (0, 1),
+                        (-1, -1),
+                        (1, 1),
+                        (-1, 1),
+                        (1, -1),
+                    ] {
+                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                        if nx >= 0 && ny >= 0 && (nx as usize) < w && (ny as usize) < h {
+                            data[ny as usize * w + nx as usize] = true;
+                        }
+                    }
+                }
+            }
+        }
+        Mask {
+            width: w,
+            height: h,
+            data,
+        }
+    }
+}
+
+/// A reconstructed surface point: where it is, and which training view saw it.
+#[derive(Debug, Clone, Copy)]
+struct SurfacePoint {
+    world: [f32; 3],
+}
+
+/// The world point at continuous pixel `(x, y)` and z-depth `z` of `camera`.
+pub fn unproject(camera: &Camera, x: f32, y: f32, z: f32) -> [f32; 3] {
+    let c = [
+        (x - camera.cx) / camera.fx * z,
+        -(y - camera.cy) / camera.fy * z,
+        -z,
+    ];
+    let r = &camera.c2w;
+    std::array::from_fn(|i| r[i][0] * c[0] + r[i][1] * c[1] + r[i][2] * c[2] + r[i][3])
+}
+
+fn under_mask(view: &View, x: f32, y: f32) -> bool {
+    view.mask.as_ref().is_some_and(|m| {
+        let (px, py) = (x.floor() as i64, y.floor() as i64);
+        px >= 0
+            && py >= 0
+            && (px as usize) < m.width
+            && (py as usize) < m.height
+            && m.data[py as usize * m.width + px as usize]
+    })
+}
+
+/// The scene's observed surface points: its sparse points (COLMAP's), else every 8th pixel
+/// of its depth maps, leaving out those under a mask (the object).
+fn surface_points(scene: &Scene, train: &[&View]) -> Vec<SurfacePoint> {
+    let mut out = Vec::new();
+    for v in train {
+        for p in scene.sparse_depth.get(&v.name).into_iter().flatten() {
+            if p.depth.is_finite() && p.depth > 0.0 && !under_mask(v, p.x, p.y) {
+                out.push(SurfacePoint {
+                    world: unproject(&v.camera, p.x, p.y, p.depth),
+                });
+            }
+        }
+    }
+    if !out.is_empty() {
+        return out;
+    }
+    for v in train {
+        let Some(depth) = &v.depth else { continue };
+        let w = v.image.width;
+        for y in (4..v.image.height).step_by(8) {
+            for x in (4..w).step_by(8) {
+                let (px, py, z) = (x as f32 + 0.5, y as f32 + 0.5, depth[y * w + x]);
+                if z.is_finite() && z > 0.0 && !under_mask(v, px, py) {
+                    out.push(SurfacePoint {
+                        world: unproject(&v.camera, px, py, z),
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Summed-area table of a mask, `(w + 1) * (h + 1)`.
+fn integral(m: &Mask) -> Vec<u32> {
+    let (w, h) = (m.width, m.height);
+    let mut s = vec![0u32; (w + 1) * (h + 1)];
+    for y in 0..h {
+        for x in 0..w {
+            s[(y + 1) * (w + 1) + x + 1] =
+                m.data[y * w + x] as u32 + s[y * (w + 1) + x + 1] + s[(y + 1) * (w + 1) + x]
+                    - s[y * (w + 1) + x];
+        }
+    }
+    s
+}
+
+/// Masked pixels in the (clipped) rectangle.
+fn count_in(s: &[u32], w: usize, h: usize, r: [f32; 4]) -> u32 {
+    let clip = |v: f32, n: usize| (v.max(0.0) as usize).min(n);
+    let (x0, y0) = (clip(r[0].floor(), w), clip(r[1].floor(), h));
+    let (x1, y1) = (clip(r[2].ceil(), w), clip(r[3].ceil(), h));
+    if x1 <= x0 || y1 <= y0 {
+        return 0;
+    }
+    let at = |x: usize, y: usize| s[y * (w + 1) + x];
+    at(x1, y1) + at(x0, y0) - at(x0, y1) - at(x1, y0)
+}
+
+fn median(mut v: Vec<f32>) -> Option<f32> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f32::total_cmp);
+    Some(v[v.len() / 2])
+}
+
+/// Places one pseudo-hole in `scene` (module docs). `scale` multiplies its side (1: the
+/// object mask's size). Errors, with the reason, when the scene has no surface points or no
+/// place keeps its margin from the masks while enough views see it.
+pub fn place(scene: &Scene, scale: f32) -> Result<PseudoHole, String> {
+    let train: Vec<&View> = scene.split(Split::Train).collect();
+    let masked: Vec<(&View, f32, Vec<u32>)> = train
+        .iter()
+        .filter_map(|v| {
+            let m = v.mask.as_ref()?;
+            let area = m.data.iter().filter(|b| **b).count();
+            (area > 0).then(|| (*v, (area as f32).sqrt(), integral(m)))
+        })
+        .collect();
+    if masked.is_empty() {
+        return Err("no training view has a mask".into());
+    }
+    let points = surface_points(scene, &train);
+    if points.is_empty() {
+        return Err(
+            "the scene has no surface points outside the masks (no COLMAP sparse/0 points and \
+             no depth maps) to place a pseudo-hole on"
+                .into(),
+        );
+    }
+    let object = object_centre(scene, &train);
+    let stride = points.len().div_ceil(MAX_CANDIDATES).max(1);
+    let need = (masked.len().div_ceil(2)).max(2).min(masked.len());
+    let mut best: Option<(usize, f32, PseudoHole)> = None;
+    for p in points.iter().step_by(stride) {
+        // the half-side that makes the cube's image as large as the mask, per masked view
+        let sizes: Vec<f32> = masked
+            .iter()
+            .filter_map(|(v, side, _)| {
+                let (_, z) = v.camera.project(p.world)?;
+                Some(0.5 * scale * side * z / v.camera.fx)
+            })
+            .collect();
+        let Some(half) = median(sizes) else { continue };
+        let hole = PseudoHole::cube(p.world, half);
+        let Some(whole) = fits(&hole, &train, need) else {
+            continue;
+        };
+        let dist = object.map_or(0.0, |o| {
+            (0..3)
+                .map(|i| (p.world[i] - o[i]).powi(2))
+                .sum::<f32>()
+                .sqrt()
+        });
+        let better = match &best {
+            None => true,
+            Some((n, d, _)) => whole > *n || (whole == *n && dist < *d),
+        };
+        if better {
+            best = Some((whole, dist, hole));
+        }
+    }
+    best.map(|(_, _, h)| h).ok_or_else(|| {
+        format!(
+            "no surface point keeps a pseudo-hole's image clear of the masks while {need} \
+             masked views see it whole"
+        )
+    })
+}
+
+/// The number of masked views that see `hole` whole, when its image keeps its margin from
+/// every view's mask and at least `need` masked views see it whole; else `None`.
+fn fits(hole: &PseudoHole, train: &[&View], need: usize) -> Option<usize> {
+    let mut whole = 0;
+    for v in train {
+        let (w, h) = (v.camera.width as f32, v.camera.height as f32);
+        let Some(r) = hole.image_rect(&v.camera) else {
+            // the camera is inside or beside the cube: no margin can be checked
+            return None;
+        };
+        if r[2] <= 0.0 || r[3] <= 0.0 || r[0] >= w || r[1] >= h {
+            continue;
+        }
+        let Some(mask) = &v.mask else { continue };
+        let (mx, my) = (MASK_MARGIN * (r[2] - r[0]), MASK_MARGIN * (r[3] - r[1]));
+        let grown = [r[0] - mx, r[1] - my, r[2] + mx, r[3] + my];
+        if count_in(&integral(mask), mask.width, mask.height, grown) > 0 {
+            return None;
+        }
+        if r[0] >= 0.0 && r[1] >= 0.0 && r[2] <= w && r[3] <= h {
+            whole += 1;
+        }
+    }
+    (whole >= need).then_some(whole)
+}
+
+/// The median of the surface points under the masks (the object's), if any.
+fn object_centre(scene: &Scene, train: &[&View]) -> Option<[f32; 3]> {
+    let mut pts = Vec::new();
+    for v in train {
+        for p in scene.sparse_depth.get(&v.name).into_iter().flatten() {
+            if p.depth.is_finite() && p.depth > 0.0 && under_mask(v, p.x, p.y) {
+                pts.push(unproject(&v.camera, p.x, p.y, p.depth));
+            }
+        }
+    }
+    let axis = |i: usize| median(pts.iter().map(|p| p[i]).collect());
+    Some([axis(0)?, axis(1)?, axis(2)?])
+}
+
+/// Each training view's withheld region of `hole` at full resolution (`None` where the hole
+/// does not show).
+pub fn withheld(scene: &Scene, hole: &PseudoHole) -> Vec<Option<Mask>> {
+    scene
+        .split(Split::Train)
+        .map(|v| {
+            let m = hole.mask(&v.camera);
+            m.data.iter().any(|b| *b).then_some(m)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera() -> Camera {
+        Camera {
+            width: 40,
+            height: 30,
+            fx: 40.0,
+            fy: 40.0,
+            cx: 20.0,
+            cy: 15.0,
+            c2w: [
+                [1.0, 0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0, 0.0],
+                [0.0, 0.0, 1.0, 4.0],
+            ],
+        }
+    }
+
+    #[test]
+    fn the_withheld_region_is_the_cubes_image_grown_by_a_pixel() {
+        let c = camera();
+        // a cube of side 1 at depth 4 (its front face at 3.5): 40 / 3.5 = 11.4 pixels wide
+        let hole = PseudoHole::cube([0.0, 0.0, 0.0], 0.5);
+        let m = hole.mask(&c);
+        let row: Vec<bool> = (0..40).map(|x| m.data[15 * 40 + x]).collect();
+        let n = row.iter().filter(|b| **b).count();
+        // the front face spans 20 +- 5.71: pixels 14..=25 (12), grown by one on each side
+        assert_eq!(n, 14, "{row:?}");
+        assert!(row[13] && row[26] && !row[12] && !row[27]);
+        // the point just inside the cube projects into the region
+        let ([x, y], _) = c.project([0.49, 0.49, 0.49]).unwrap();
+        assert!(m.data[y as usize * 40 + x as usize]);
+        assert_eq!(unproject(&c, 30.0, 15.0, 4.0), [1.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn rays_beside_the_cube_miss_it() {
+        let hole = PseudoHole::cube([0.0, 0.0, 0.0], 0.5);
+        assert!(hole.hit([0.0, 0.0, 4.0], [0.0, 0.0, -1.0]));
+        assert!(
+            !hole.hit([0.0, 0.0, 4.0], [0.0, 0.0, 1.0]),
+            "behind the camera"
+        );
+        assert!(!hole.hit([0.6, 0.0, 4.0], [0.0, 0.0, -1.0]));
+        assert!(hole.hit([-2.0, 0.4, 0.0], [1.0, 0.0, 0.0]));
+    }
+}

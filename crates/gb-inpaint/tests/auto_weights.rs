@@ -1,0 +1,229 @@
+//! Weights each scene picks for itself ([`gb_inpaint::auto`]), on a small procedural stairs
+//! scene with the committed tiny SD-inpainting fixture, on flex:
+//!
+//! - the pseudo-hole is seen by no training view: no trained pixel's ray and no sparse point
+//!   that supervises crosses it, it stays clear of the object's masks, and masked views show
+//!   it;
+//! - the choice picks guidance when the guidance is the oracle's exact score of the true
+//!   images, and 0 when the same pull points at noise.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use gb_core::{BackendKind, RgbImage};
+use gb_diffusion::distill::{Branch, GuidanceMethod, PriorInputMode};
+use gb_inpaint::auto::{choose_weights, pseudo_hole, AutoInputs, Weight};
+use gb_inpaint::{GuidancePrior, MethodConfig, PromptOverrides, SceneCaptions};
+use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
+use gb_nerf::scene::{LoadOptions, Scene, Split};
+use gb_nerf::train::data::TrainData;
+use gb_nerf::train::{DepthSupervision, NerfConfig};
+
+/// Field initialisation seeds a process-global device RNG: one test at a time.
+static LOCK: Mutex<()> = Mutex::new(());
+
+const KIND: BackendKind = BackendKind::Flex;
+
+fn prior_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../gb-diffusion/tests/fixtures/sd_image/pipeline")
+}
+
+fn scene(dir: &Path) -> Scene {
+    let opts = ProceduralOptions {
+        name: SceneName::Stairs,
+        seed: 3,
+        width: 128,
+        height: 96,
+        views: 6,
+        test_views: 1,
+        dilate: 1,
+    };
+    procedural::write(&opts, dir).unwrap();
+    gb_nerf::scene::load(dir, &LoadOptions::default())
+        .unwrap()
+        .1
+}
+
+#[test]
+fn a_pseudo_hole_is_seen_by_no_training_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let hole = pseudo_hole::place(&s, 1.0).unwrap();
+    let holes = pseudo_hole::withheld(&s, &hole);
+    let train: Vec<_> = s.split(Split::Train).collect();
+    // masked views show it, and its image keeps clear of the object in every view
+    let shown = holes
+        .iter()
+        .zip(&train)
+        .filter(|(h, v)| h.is_some() && v.mask.is_some())
+        .count();
+    assert!(shown >= 2, "{shown} masked views show the pseudo-hole");
+    for (h, v) in holes.iter().zip(&train) {
+        let (Some(h), Some(m)) = (h, &v.mask) else {
+            continue;
+        };
+        let overlap = h
+            .data
+            .iter()
+            .zip(&m.data)
+            .filter(|(a, b)| **a && **b)
+            .count();
+        assert_eq!(overlap, 0, "view {} withholds object pixels", v.name);
+    }
+    // a trial's training data: the pseudo-hole as the mask, the object withheld
+    let mut trial = s.clone();
+    let mut objects = Vec::new();
+    for (v, h) in trial
+        .views
+        .iter_mut()
+        .filter(|v| v.split == Split::Train)
+        .zip(&holes)
+    {
+        objects.push(v.mask.clone());
+        v.mask = h.clone();
+    }
+    let mut data = TrainData::from_scene(&trial, 1, DepthSupervision::Sparse).unwrap();
+    let before = (data.pixels.len(), data.sparse.len());
+    data.withhold(&objects).unwrap();
+    assert!(data.pixels.len() < before.0 && data.sparse.len() < before.1);
+    for p in &data.pixels {
+        let c = &data.views[p.view as usize].camera;
+        let d = c.ray_direction(p.x as f32 + 0.5, p.y as f32 + 0.5);
+        assert!(!hole.hit(c.origin(), d), "pixel {p:?} sees the pseudo-hole");
+        assert!(!objects[p.view as usize]
+            .as_ref()
+            .is_some_and(|m| m.data[p.y as usize * m.width + p.x as usize]));
+    }
+    for p in &data.sparse {
+        let c = &data.views[p.view as usize].camera;
+        let world = pseudo_hole::unproject(c, p.x, p.y, p.depth);
+        assert!(
+            !hole.contains(world),
+            "sparse point {p:?} lies in the pseudo-hole"
+        );
+        assert!(!hole.hit(c.origin(), c.ray_direction(p.x, p.y)));
+    }
+    // the hole is centred on a surface: its pixels were training pixels before
+    let all = TrainData::from_scene(&s, 1, DepthSupervision::None).unwrap();
+    let seen_before = all
+        .pixels
+        .iter()
+        .filter(|p| {
+            let c = &all.views[p.view as usize].camera;
+            hole.hit(
+                c.origin(),
+                c.ray_direction(p.x as f32 + 0.5, p.y as f32 + 0.5),
+            )
+        })
+        .count();
+    assert!(seen_before > 50, "{seen_before}");
+}
+
+/// The RGB-only SDS method (guidance scale 1) whose prompt and unconditional branches the
+/// oracle answers from `clean`: its pull is exactly toward `clean`'s latents.
+fn oracle_method(clean: &Path) -> MethodConfig {
+    let mut m = MethodConfig::builtin("bsd").unwrap();
+    m.normal = None;
+    m.lambda_normal = Weight::Fixed(0.0);
+    m.lambda_rgb = Weight::Auto;
+    m.auto.rgb = vec![0.0, 1.0];
+    m.auto.trial_steps = 1.0;
+    m.prior_input = PriorInputMode::PasteOnGroundTruth;
+    m.rgb.as_mut().unwrap().guidance = GuidanceMethod::Sds {
+        guidance_scale: 1.0,
+    };
+    m.oracle.clean = Some(clean.to_path_buf());
+    m.oracle.branches = vec![Branch::Text, Branch::Unconditional];
+    m.validate().unwrap();
+    m
+}
+
+fn config() -> NerfConfig {
+    let mut c = NerfConfig::preset("fast").unwrap();
+    c.train.rays_per_batch = 256;
+    c.train.steps = 80;
+    c.sampler.samples_per_ray = 24;
+    c
+}
+
+fn choose(s: &Scene, dir: &Path, clean: &Path, out: &Path) -> gb_inpaint::auto::AutoReport {
+    let method = oracle_method(clean);
+    let config = config();
+    let images = gb_inpaint::oracle::load_object_free(s, clean, 1, "[oracle] clean").unwrap();
+    let prompts = method.resolve_prompts(&SceneCaptions::read(dir), &PromptOverrides::default());
+    let mut prior = Some(
+        GuidancePrior::load(&prior_dir(), None, gb_core::Precision::F32, &KIND.device()).unwrap(),
+    );
+    let inputs = AutoInputs {
+        scene: s,
+        method: &method,
+        config: &config,
+        prompts: &prompts,
+        oracle: Some(&images),
+        backend: KIND,
+        weights: gb_eval::default_weights_dir(),
+        out,
+        progress: false,
+    };
+    let report = choose_weights(&inputs, &mut prior).unwrap();
+    assert!(prior.is_some(), "the prior is handed back");
+    // the second call reads the cache
+    let again = choose_weights(&inputs, &mut prior).unwrap();
+    assert!(again.cached && !report.cached);
+    assert_eq!(again.trials, report.trials);
+    report
+}
+
+#[test]
+fn auto_weights_choose_the_oracles_guidance_and_refuse_a_pull_toward_noise() {
+    let _g = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let truth = choose(
+        &s,
+        dir.path(),
+        &dir.path().join("clean"),
+        &dir.path().join("truth"),
+    );
+    // the same pull, toward noise images
+    let noise_dir = dir.path().join("noise");
+    std::fs::create_dir_all(&noise_dir).unwrap();
+    let mut state = 12345u64;
+    for v in s.split(Split::Train) {
+        let (w, h) = (v.image.width, v.image.height);
+        let data = (0..w * h * 3)
+            .map(|_| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (state >> 40) as f32 / (1u64 << 24) as f32
+            })
+            .collect();
+        let img = RgbImage {
+            width: w,
+            height: h,
+            data,
+        };
+        gb_core::write_rgb_png(&noise_dir.join(format!("{}.png", v.name)), &img).unwrap();
+    }
+    let noise = choose(&s, dir.path(), &noise_dir, &dir.path().join("noise-run"));
+    for (name, r) in [("truth", &truth), ("noise", &noise)] {
+        println!("{name}: chose lambda_rgb {} from", r.lambda_rgb);
+        for t in &r.trials {
+            println!(
+                "  {} : ssim {:?} lpips {:?} d_psnr {:?} rank {}",
+                t.lambda_rgb, t.ssim_bbox, t.lpips_bbox, t.d_psnr_bbox, t.rank_sum
+            );
+        }
+    }
+    assert_eq!(truth.trials.len(), 2);
+    assert!(truth.withheld_views >= 2 && truth.withheld_pixels > 50);
+    // the true pull improves the hidden colour; the noise pull ruins it
+    let ssim = |r: &gb_inpaint::auto::AutoReport, k: usize| r.trials[k].ssim_bbox.unwrap();
+    assert!(ssim(&truth, 1) > ssim(&truth, 0), "{truth:?}");
+    assert!(ssim(&noise, 1) < ssim(&noise, 0), "{noise:?}");
+    assert_eq!(truth.lambda_rgb, 1.0);
+    assert_eq!(noise.lambda_rgb, 0.0);
+    // the unguided trial is the same in both (the oracle only acts through the guidance)
+    assert_eq!(truth.trials[0].ssim_bbox, noise.trials[0].ssim_bbox);
+}
