@@ -41,18 +41,16 @@ fn an_unreadable_autoencoder_loss_log_is_an_error_naming_it() {
             false,
         )
     };
-    let err = run()
-        .err()
-        .expect("a broken loss log is refused")
-        .to_string();
+    let refused = |why: &str| match run() {
+        Ok(_) => panic!("{why} is refused"),
+        Err(e) => e.to_string(),
+    };
+    let err = refused("a broken loss log");
     assert!(
         err.contains("losses.json") && err.contains("not a list"),
         "{err}"
     );
     std::fs::remove_file(out.join("vae/losses.json")).unwrap();
-    let err = run()
-        .err()
-        .expect("a missing loss log is refused")
-        .to_string();
+    let err = refused("a missing loss log");
     assert!(err.contains("losses.json"), "{err}");
 }

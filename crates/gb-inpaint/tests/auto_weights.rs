@@ -29,9 +29,13 @@ fn prior_dir() -> PathBuf {
 }
 
 fn scene(dir: &Path) -> Scene {
+    scene_of(dir, SceneName::Stairs, 3)
+}
+
+fn scene_of(dir: &Path, name: SceneName, seed: u64) -> Scene {
     let opts = ProceduralOptions {
-        name: SceneName::Stairs,
-        seed: 3,
+        name,
+        seed,
         width: 128,
         height: 96,
         views: 6,
@@ -117,6 +121,41 @@ fn a_pseudo_hole_is_seen_by_no_training_view() {
         })
         .count();
     assert!(seen_before > 50, "{seen_before}");
+}
+
+#[test]
+fn a_pseudo_hole_fits_every_procedural_scene_clear_of_its_masks() {
+    // fence's mask spans much of each view: its pseudo-hole is a smaller cube
+    for (name, seed) in [
+        (SceneName::Stairs, 100),
+        (SceneName::Fence, 100),
+        (SceneName::Alcove, 100),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let s = scene_of(dir.path(), name, seed);
+        let hole = pseudo_hole::place(&s, 1.0).unwrap_or_else(|e| panic!("{name:?}: {e}"));
+        let holes = pseudo_hole::withheld(&s, &hole);
+        let train: Vec<_> = s.split(Split::Train).collect();
+        let mut shown = 0;
+        for (h, v) in holes.iter().zip(&train) {
+            let (Some(h), Some(m)) = (h, &v.mask) else {
+                continue;
+            };
+            shown += 1;
+            let overlap = h
+                .data
+                .iter()
+                .zip(&m.data)
+                .filter(|(a, b)| **a && **b)
+                .count();
+            assert_eq!(
+                overlap, 0,
+                "{name:?}: view {} withholds object pixels",
+                v.name
+            );
+        }
+        assert!(shown >= 2, "{name:?}: {shown} masked views show it");
+    }
 }
 
 /// The RGB-only SDS method (guidance scale 1) whose prompt and unconditional branches the

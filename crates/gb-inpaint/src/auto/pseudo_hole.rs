@@ -235,10 +235,47 @@ fn median(mut v: Vec<f32>) -> Option<f32> {
     Some(v[v.len() / 2])
 }
 
+/// The sides tried, largest first, as fractions of the requested one ([`place`]).
+const SHRINK: [f32; 4] = [1.0, 0.7, 0.5, 0.35];
+
 /// Places one pseudo-hole in `scene` (module docs). `scale` multiplies its side (1: the
-/// object mask's size). Errors, with the reason, when the scene has no surface points or no
-/// place keeps its margin from the masks while enough views see it.
+/// object mask's size). Where no place keeps its margin from the masks while half the masked
+/// views see it whole (a mask that spans much of every view, as on `fence`), a smaller cube
+/// is tried, then one that two masked views see whole: the largest side wins, then the most
+/// views. Errors, with the reason, when the scene has no surface points or nothing fits.
 pub fn place(scene: &Scene, scale: f32) -> Result<PseudoHole, String> {
+    let masked = scene
+        .split(Split::Train)
+        .filter(|v| v.mask.as_ref().is_some_and(|m| m.data.iter().any(|b| *b)))
+        .count();
+    let half = masked.div_ceil(2).max(2).min(masked.max(1));
+    let mut last = String::new();
+    for shrink in SHRINK {
+        for need in [half, 2.min(half)] {
+            match place_with(scene, scale * shrink, need) {
+                Ok(hole) => {
+                    if shrink < 1.0 || need < half {
+                        tracing::warn!(
+                            side = shrink,
+                            views = need,
+                            "auto weights: the pseudo-hole did not fit at the mask's size seen \
+                             by half the masked views; using a smaller or less seen one"
+                        );
+                    }
+                    return Ok(hole);
+                }
+                Err(e) => last = e,
+            }
+            if need == 2.min(half) {
+                break;
+            }
+        }
+    }
+    Err(last)
+}
+
+/// [`place`] at one side `scale`, with at least `need` masked views seeing it whole.
+fn place_with(scene: &Scene, scale: f32, need: usize) -> Result<PseudoHole, String> {
     let train: Vec<&View> = scene.split(Split::Train).collect();
     let masked: Vec<(&View, f32, Vec<u32>)> = train
         .iter()
@@ -261,7 +298,7 @@ pub fn place(scene: &Scene, scale: f32) -> Result<PseudoHole, String> {
     }
     let object = object_centre(scene, &train);
     let stride = points.len().div_ceil(MAX_CANDIDATES).max(1);
-    let need = (masked.len().div_ceil(2)).max(2).min(masked.len());
+    let need = need.min(masked.len());
     let mut best: Option<(usize, f32, PseudoHole)> = None;
     for p in points.iter().step_by(stride) {
         // the half-side that makes the cube's image as large as the mask, per masked view
@@ -294,7 +331,9 @@ pub fn place(scene: &Scene, scale: f32) -> Result<PseudoHole, String> {
     best.map(|(_, _, h)| h).ok_or_else(|| {
         format!(
             "no surface point keeps a pseudo-hole's image clear of the masks while {need} \
-             masked views see it whole"
+             masked views see it whole, down to {:.2} of the mask's size; give \
+             lambda_rgb and lambda_normal numbers instead of \"auto\"",
+            scale
         )
     })
 }
