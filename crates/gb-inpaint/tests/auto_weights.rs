@@ -48,32 +48,38 @@ fn scene_of(dir: &Path, name: SceneName, seed: u64) -> Scene {
         .1
 }
 
-#[test]
-fn a_pseudo_hole_is_seen_by_no_training_view() {
-    let dir = tempfile::tempdir().unwrap();
-    let s = scene(dir.path());
-    let hole = pseudo_hole::place(&s, 1.0).unwrap();
-    let holes = pseudo_hole::withheld(&s, &hole);
-    let train: Vec<_> = s.split(Split::Train).collect();
-    // masked views show it, and its image keeps clear of the object in every view
-    let shown = holes
-        .iter()
-        .zip(&train)
-        .filter(|(h, v)| h.is_some() && v.mask.is_some())
-        .count();
-    assert!(shown >= 2, "{shown} masked views show the pseudo-hole");
-    for (h, v) in holes.iter().zip(&train) {
+/// The masked training views that show the pseudo-hole (`holes`, per training view),
+/// asserting that none withholds a pixel of the object's mask.
+fn masked_views_showing(s: &Scene, holes: &[Option<gb_nerf::scene::Mask>]) -> usize {
+    let mut shown = 0;
+    for (h, v) in holes.iter().zip(s.split(Split::Train)) {
         let (Some(h), Some(m)) = (h, &v.mask) else {
             continue;
         };
+        shown += 1;
         let overlap = h
             .data
             .iter()
             .zip(&m.data)
             .filter(|(a, b)| **a && **b)
             .count();
-        assert_eq!(overlap, 0, "view {} withholds object pixels", v.name);
+        assert_eq!(
+            overlap, 0,
+            "{}: view {} withholds object pixels",
+            s.name, v.name
+        );
     }
+    shown
+}
+
+#[test]
+fn a_pseudo_hole_is_seen_by_no_training_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let hole = pseudo_hole::place(&s, 1.0).unwrap();
+    let holes = pseudo_hole::withheld(&s, &hole);
+    let shown = masked_views_showing(&s, &holes);
+    assert!(shown >= 2, "{shown} masked views show the pseudo-hole");
     // a trial's training data: the pseudo-hole as the mask, the object withheld
     let mut trial = s.clone();
     let mut objects = Vec::new();
@@ -134,26 +140,7 @@ fn a_pseudo_hole_fits_every_procedural_scene_clear_of_its_masks() {
         let dir = tempfile::tempdir().unwrap();
         let s = scene_of(dir.path(), name, seed);
         let hole = pseudo_hole::place(&s, 1.0).unwrap_or_else(|e| panic!("{name:?}: {e}"));
-        let holes = pseudo_hole::withheld(&s, &hole);
-        let train: Vec<_> = s.split(Split::Train).collect();
-        let mut shown = 0;
-        for (h, v) in holes.iter().zip(&train) {
-            let (Some(h), Some(m)) = (h, &v.mask) else {
-                continue;
-            };
-            shown += 1;
-            let overlap = h
-                .data
-                .iter()
-                .zip(&m.data)
-                .filter(|(a, b)| **a && **b)
-                .count();
-            assert_eq!(
-                overlap, 0,
-                "{name:?}: view {} withholds object pixels",
-                v.name
-            );
-        }
+        let shown = masked_views_showing(&s, &pseudo_hole::withheld(&s, &hole));
         assert!(shown >= 2, "{name:?}: {shown} masked views show it");
     }
 }
