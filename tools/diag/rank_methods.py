@@ -12,7 +12,7 @@ Every variant is also compared with `none`: for each scene and metric, whether i
 The rule is fixed before the runs are read; use it on tuning seeds only, and report the winner
 on seeds no choice was made on.
 
-    python3 tools/diag/rank_methods.py --incumbent gb-nerf-unseen --out F.json REPORT.json...
+    python3 tools/diag/rank_methods.py --incumbent gb-nerf-unseen [--methods A,B] --out F.json REPORT.json...
 
 Standard library only.
 """
@@ -29,8 +29,11 @@ BAR = [("ssim_bbox", True), ("lpips_bbox", False), ("d_psnr_bbox", True)]
 SHOWN = BAR + [("psnr_bbox", True), ("psnr", True)]
 
 
-def pool(paths):
-    """{scene: {method: {metric: {seed: value}}}} from the reports' per-method value lists."""
+def pool(paths, only=None):
+    """{scene: {method: {metric: {seed: value}}}} from the reports' per-method value lists;
+    with `only`, the methods in it and `none`. A seed seen twice is an error unless both
+    reports hold the same value within a relative 1e-6 (the same run reproduced, as `none` is
+    across sessions, up to the order of the metric network's float sums)."""
     pooled = defaultdict(lambda: defaultdict(lambda: defaultdict(dict)))
     for path in paths:
         with open(path) as f:
@@ -39,6 +42,8 @@ def pool(paths):
         seeds = report["scene_seeds"]
         for row in report["baselines"]["rows"]:
             method = row["method"]
+            if only is not None and method != "none" and method not in only:
+                continue
             for key, _ in SHOWN:
                 values = row.get(f"{key}_values")
                 if values is None:
@@ -46,9 +51,10 @@ def pool(paths):
                 if len(values) != len(seeds):
                     sys.exit(f"{path}: row {method}: {key}_values and scene_seeds differ in length")
                 for seed, value in zip(seeds, values):
-                    if seed in pooled[scene][method][key]:
-                        sys.exit(f"{path}: {scene} seed {seed} of {method} is in two reports")
-                    pooled[scene][method][key][seed] = value
+                    seen = pooled[scene][method][key].get(seed, value)
+                    if abs(seen - value) > 1e-6 * max(abs(seen), abs(value)):
+                        sys.exit(f"{path}: {scene} seed {seed} of {method} is in two reports with different values")
+                    pooled[scene][method][key].setdefault(seed, value)
     return pooled
 
 
@@ -98,8 +104,11 @@ def main():
     parser.add_argument("reports", nargs="+", help="bench quality JSON reports")
     parser.add_argument("--incumbent", required=True, help="the current default, kept on a tie")
     parser.add_argument("--out", help="write the ranking here as JSON")
+    parser.add_argument(
+        "--methods", help="comma-separated variants to rank (default: every one in the reports)"
+    )
     args = parser.parse_args()
-    pooled = pool(args.reports)
+    pooled = pool(args.reports, args.methods.split(",") if args.methods else None)
     table, rank_sum, beats_none, winner = rank(pooled, args.incumbent)
     for scene, methods in table.items():
         print(f"\n{scene}")
