@@ -140,7 +140,7 @@ impl PseudoHole {
     }
 }
 
-/// A reconstructed surface point: where it is, and which training view saw it.
+/// A reconstructed surface point, in world units.
 #[derive(Debug, Clone, Copy)]
 struct SurfacePoint {
     world: [f32; 3],
