@@ -106,7 +106,7 @@ fn a_pseudo_hole_is_seen_by_no_training_view() {
     }
     for p in &data.sparse {
         let c = &data.views[p.view as usize].camera;
-        let world = pseudo_hole::unproject(c, p.x, p.y, p.depth);
+        let world = c.unproject(p.x, p.y, p.depth);
         assert!(
             !hole.contains(world),
             "sparse point {p:?} lies in the pseudo-hole"

@@ -329,14 +329,10 @@ pub fn choose_weights(
         objects.push(v.mask.as_ref().map(|m| downscale_mask(m, f)));
         v.mask = m.clone();
     }
-    let scored: Vec<(usize, Mask)> = holes
-        .iter()
-        .enumerate()
-        .filter_map(|(k, m)| Some((k, downscale_mask(m.as_ref()?, f))))
-        .collect();
+    let scored = score_targets(i.scene, &holes, f);
     let withheld_pixels = scored
         .iter()
-        .map(|(_, m)| m.data.iter().filter(|b| **b).count())
+        .map(|t| t.mask.iter().filter(|b| **b).count())
         .sum();
     let steps = ((i.config.train.steps as f64 * i.method.auto.trial_steps).round() as usize).max(1);
     tracing::info!(
@@ -418,7 +414,7 @@ fn trial(
     i: &AutoInputs,
     trial_scene: &Scene,
     objects: &[Option<Mask>],
-    scored: &[(usize, Mask)],
+    scored: &[ScoreTarget],
     weights: (f64, f64),
     steps: usize,
     prior: &mut Option<GuidancePrior>,
@@ -438,9 +434,8 @@ fn trial(
     } else {
         None
     };
-    let result =
-        GuidedTrainer::new_withholding(trial_scene, config, method, guidance, i.backend, objects);
-    let mut t = result?;
+    let mut t =
+        GuidedTrainer::new_withholding(trial_scene, config, method, guidance, i.backend, objects)?;
     if let (Some(images), Some(_)) = (i.oracle, i.method.oracle.clean.as_ref()) {
         t.set_oracle(crate::oracle::OracleTargets::new(
             images.to_vec(),
@@ -458,47 +453,74 @@ fn trial(
     scores
 }
 
-/// The [`METRICS`] of `t`'s renders of the training views over their withheld pixels (the
-/// box of each view's withheld pixels, rendered alone).
+/// One training view's withheld pixels as a trial scores them: the box of the pixels at
+/// the training resolution, with its camera, truth and mask, cut once for every trial.
+struct ScoreTarget {
+    name: String,
+    /// The camera of the box alone (only the box is rendered: the metrics cover nothing else).
+    camera: gb_nerf::scene::Camera,
+    width: usize,
+    height: usize,
+    gt: RgbImage,
+    mask: Vec<bool>,
+    /// The truth's disparity over the box, where the scene has depth maps.
+    disparity: Option<gb_eval::disparity::ScalarMap>,
+}
+
+/// The [`ScoreTarget`]s of the training views that `holes` (per training view, full
+/// resolution) shows in, at downscale `f`.
+fn score_targets(scene: &Scene, holes: &[Option<Mask>], f: usize) -> Vec<ScoreTarget> {
+    let mut targets = Vec::new();
+    for (view, hole) in scene.split(Split::Train).zip(holes) {
+        let Some(hole) = hole else { continue };
+        let mask = downscale_mask(hole, f);
+        let Some(bbox) = mask.bbox() else { continue };
+        let v = prepare_view(view, f);
+        let (x0, y0, x1, y1) = bbox;
+        let (w, h) = (x1 - x0, y1 - y0);
+        let pixels: Vec<usize> = (y0..y1)
+            .flat_map(|y| (x0..x1).map(move |x| y * v.image.width + x))
+            .collect();
+        targets.push(ScoreTarget {
+            name: view.name.clone(),
+            camera: crop_camera(&v.camera, bbox, w, h),
+            width: w,
+            height: h,
+            gt: RgbImage {
+                width: w,
+                height: h,
+                data: pixels
+                    .iter()
+                    .flat_map(|p| v.image.data[p * 3..p * 3 + 3].iter().copied())
+                    .collect(),
+            },
+            mask: pixels.iter().map(|p| mask.data[*p]).collect(),
+            disparity: v.depth.as_ref().map(|d| {
+                let truth: Vec<f32> = pixels.iter().map(|p| d[*p]).collect();
+                disparity_map(&truth, w, h)
+            }),
+        });
+    }
+    targets
+}
+
+/// The [`METRICS`] of `t`'s renders of the withheld pixels' boxes.
 fn score(
     i: &AutoInputs,
     t: &GuidedTrainer,
-    scored: &[(usize, Mask)],
+    scored: &[ScoreTarget],
 ) -> Result<[Option<f64>; 3], InpaintError> {
-    let train: Vec<_> = i.scene.split(Split::Train).collect();
-    let f = t.config.train.image_downscale;
     let mut pairs = Vec::new();
-    for (k, mask) in scored {
-        let v = prepare_view(train[*k], f);
-        // only the withheld pixels' box is rendered: the metrics cover nothing else
-        let Some(bbox) = mask.bbox() else { continue };
-        let (x0, y0, x1, y1) = bbox;
-        let (w, h) = (x1 - x0, y1 - y0);
-        let r = t.render(&crop_camera(&v.camera, bbox, w, h))?;
-        let cut = |width: usize, c: usize| -> Vec<usize> {
-            (y0..y1)
-                .flat_map(|y| {
-                    (x0..x1).flat_map(move |x| (0..c).map(move |i| (y * width + x) * c + i))
-                })
-                .collect()
-        };
-        let gt = RgbImage {
-            width: w,
-            height: h,
-            data: cut(v.image.width, 3)
-                .into_iter()
-                .map(|i| v.image.data[i])
-                .collect(),
-        };
-        let pixels = cut(v.image.width, 1);
+    for target in scored {
+        let r = t.render(&target.camera)?;
         pairs.push(EvalPair {
-            name: train[*k].name.clone(),
-            gt: Some(gt),
-            mask: Some(pixels.iter().map(|i| mask.data[*i]).collect()),
-            disparity: v.depth.as_ref().map(|d| {
-                let truth: Vec<f32> = pixels.iter().map(|i| d[*i]).collect();
-                (disparity_map(&r.depth, w, h), disparity_map(&truth, w, h))
-            }),
+            name: target.name.clone(),
+            gt: Some(target.gt.clone()),
+            mask: Some(target.mask.clone()),
+            disparity: target
+                .disparity
+                .clone()
+                .map(|truth| (disparity_map(&r.depth, target.width, target.height), truth)),
             pred: r.rgb,
         });
     }

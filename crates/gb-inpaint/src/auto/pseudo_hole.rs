@@ -140,23 +140,6 @@ impl PseudoHole {
     }
 }
 
-/// A reconstructed surface point, in world units.
-#[derive(Debug, Clone, Copy)]
-struct SurfacePoint {
-    world: [f32; 3],
-}
-
-/// The world point at continuous pixel `(x, y)` and z-depth `z` of `camera`.
-pub fn unproject(camera: &Camera, x: f32, y: f32, z: f32) -> [f32; 3] {
-    let c = [
-        (x - camera.cx) / camera.fx * z,
-        -(y - camera.cy) / camera.fy * z,
-        -z,
-    ];
-    let r = &camera.c2w;
-    std::array::from_fn(|i| r[i][0] * c[0] + r[i][1] * c[1] + r[i][2] * c[2] + r[i][3])
-}
-
 fn under_mask(view: &View, x: f32, y: f32) -> bool {
     view.mask.as_ref().is_some_and(|m| {
         let (px, py) = (x.floor() as i64, y.floor() as i64);
@@ -170,14 +153,12 @@ fn under_mask(view: &View, x: f32, y: f32) -> bool {
 
 /// The scene's observed surface points: its sparse points (COLMAP's), else every 8th pixel
 /// of its depth maps, leaving out those under a mask (the object).
-fn surface_points(scene: &Scene, train: &[&View]) -> Vec<SurfacePoint> {
+fn surface_points(scene: &Scene, train: &[&View]) -> Vec<[f32; 3]> {
     let mut out = Vec::new();
     for v in train {
         for p in scene.sparse_depth.get(&v.name).into_iter().flatten() {
             if p.depth.is_finite() && p.depth > 0.0 && !under_mask(v, p.x, p.y) {
-                out.push(SurfacePoint {
-                    world: unproject(&v.camera, p.x, p.y, p.depth),
-                });
+                out.push(v.camera.unproject(p.x, p.y, p.depth));
             }
         }
     }
@@ -191,9 +172,7 @@ fn surface_points(scene: &Scene, train: &[&View]) -> Vec<SurfacePoint> {
             for x in (4..w).step_by(8) {
                 let (px, py, z) = (x as f32 + 0.5, y as f32 + 0.5, depth[y * w + x]);
                 if z.is_finite() && z > 0.0 && !under_mask(v, px, py) {
-                    out.push(SurfacePoint {
-                        world: unproject(&v.camera, px, py, z),
-                    });
+                    out.push(v.camera.unproject(px, py, z));
                 }
             }
         }
@@ -244,15 +223,12 @@ const SHRINK: [f32; 4] = [1.0, 0.7, 0.5, 0.35];
 /// is tried, then one that two masked views see whole: the largest side wins, then the most
 /// views. Errors, with the reason, when the scene has no surface points or nothing fits.
 pub fn place(scene: &Scene, scale: f32) -> Result<PseudoHole, String> {
-    let masked = scene
-        .split(Split::Train)
-        .filter(|v| v.mask.as_ref().is_some_and(|m| m.data.iter().any(|b| *b)))
-        .count();
-    let half = masked.div_ceil(2).max(2).min(masked.max(1));
+    let ctx = Placement::new(scene)?;
+    let half = ctx.masked.len().div_ceil(2).max(2).min(ctx.masked.len());
     let mut last = String::new();
     for shrink in SHRINK {
         for need in [half, 2.min(half)] {
-            match place_with(scene, scale * shrink, need) {
+            match ctx.place(scale * shrink, need) {
                 Ok(hole) => {
                     if shrink < 1.0 || need < half {
                         tracing::warn!(
@@ -274,94 +250,122 @@ pub fn place(scene: &Scene, scale: f32) -> Result<PseudoHole, String> {
     Err(last)
 }
 
-/// [`place`] at one side `scale`, with at least `need` masked views seeing it whole.
-fn place_with(scene: &Scene, scale: f32, need: usize) -> Result<PseudoHole, String> {
-    let train: Vec<&View> = scene.split(Split::Train).collect();
-    let masked: Vec<(&View, f32, Vec<u32>)> = train
-        .iter()
-        .filter_map(|v| {
-            let m = v.mask.as_ref()?;
-            let area = m.data.iter().filter(|b| **b).count();
-            (area > 0).then(|| (*v, (area as f32).sqrt(), integral(m)))
-        })
-        .collect();
-    if masked.is_empty() {
-        return Err("no training view has a mask".into());
-    }
-    let points = surface_points(scene, &train);
-    if points.is_empty() {
-        return Err(
-            "the scene has no surface points outside the masks (no COLMAP sparse/0 points and \
-             no depth maps) to place a pseudo-hole on"
-                .into(),
-        );
-    }
-    let object = object_centre(scene, &train);
-    let stride = points.len().div_ceil(MAX_CANDIDATES).max(1);
-    let need = need.min(masked.len());
-    let mut best: Option<(usize, f32, PseudoHole)> = None;
-    for p in points.iter().step_by(stride) {
-        // the half-side that makes the cube's image as large as the mask, per masked view
-        let sizes: Vec<f32> = masked
-            .iter()
-            .filter_map(|(v, side, _)| {
-                let (_, z) = v.camera.project(p.world)?;
-                Some(0.5 * scale * side * z / v.camera.fx)
-            })
-            .collect();
-        let Some(half) = median(sizes) else { continue };
-        let hole = PseudoHole::cube(p.world, half);
-        let Some(whole) = fits(&hole, &train, need) else {
-            continue;
-        };
-        let dist = object.map_or(0.0, |o| {
-            (0..3)
-                .map(|i| (p.world[i] - o[i]).powi(2))
-                .sum::<f32>()
-                .sqrt()
-        });
-        let better = match &best {
-            None => true,
-            Some((n, d, _)) => whole > *n || (whole == *n && dist < *d),
-        };
-        if better {
-            best = Some((whole, dist, hole));
-        }
-    }
-    best.map(|(_, _, h)| h).ok_or_else(|| {
-        format!(
-            "no surface point keeps a pseudo-hole's image clear of the masks while {need} \
-             masked views see it whole, down to {:.2} of the mask's size; give \
-             lambda_rgb and lambda_normal numbers instead of \"auto\"",
-            scale
-        )
-    })
+/// What every try of [`place`] reads, computed once: the training views, each one's mask
+/// as a summed-area table, the masked views' mask sides, the candidate surface points and
+/// the object's centre.
+struct Placement<'a> {
+    train: Vec<&'a View>,
+    /// Per training view, the summed-area table of its mask (`None`: no mask).
+    integrals: Vec<Option<Vec<u32>>>,
+    /// `(training view index, square root of its mask's area)` of the masked views.
+    masked: Vec<(usize, f32)>,
+    points: Vec<[f32; 3]>,
+    object: Option<[f32; 3]>,
 }
 
-/// The number of masked views that see `hole` whole, when its image keeps its margin from
-/// every view's mask and at least `need` masked views see it whole; else `None`.
-fn fits(hole: &PseudoHole, train: &[&View], need: usize) -> Option<usize> {
-    let mut whole = 0;
-    for v in train {
-        let (w, h) = (v.camera.width as f32, v.camera.height as f32);
-        let Some(r) = hole.image_rect(&v.camera) else {
-            // the camera is inside or beside the cube: no margin can be checked
-            return None;
-        };
-        if r[2] <= 0.0 || r[3] <= 0.0 || r[0] >= w || r[1] >= h {
-            continue;
+impl<'a> Placement<'a> {
+    fn new(scene: &'a Scene) -> Result<Self, String> {
+        let train: Vec<&View> = scene.split(Split::Train).collect();
+        let integrals: Vec<Option<Vec<u32>>> = train
+            .iter()
+            .map(|v| v.mask.as_ref().map(integral))
+            .collect();
+        let masked: Vec<(usize, f32)> = train
+            .iter()
+            .enumerate()
+            .filter_map(|(k, v)| {
+                let area = v.mask.as_ref()?.data.iter().filter(|b| **b).count();
+                (area > 0).then(|| (k, (area as f32).sqrt()))
+            })
+            .collect();
+        if masked.is_empty() {
+            return Err("no training view has a mask".into());
         }
-        let Some(mask) = &v.mask else { continue };
-        let (mx, my) = (MASK_MARGIN * (r[2] - r[0]), MASK_MARGIN * (r[3] - r[1]));
-        let grown = [r[0] - mx, r[1] - my, r[2] + mx, r[3] + my];
-        if count_in(&integral(mask), mask.width, mask.height, grown) > 0 {
-            return None;
+        let points = surface_points(scene, &train);
+        if points.is_empty() {
+            return Err(
+                "the scene has no surface points outside the masks (no COLMAP sparse/0 points \
+                 and no depth maps) to place a pseudo-hole on"
+                    .into(),
+            );
         }
-        if r[0] >= 0.0 && r[1] >= 0.0 && r[2] <= w && r[3] <= h {
-            whole += 1;
-        }
+        let object = object_centre(scene, &train);
+        Ok(Self {
+            train,
+            integrals,
+            masked,
+            points,
+            object,
+        })
     }
-    (whole >= need).then_some(whole)
+
+    /// [`place`] at one side `scale`, with at least `need` masked views seeing it whole.
+    fn place(&self, scale: f32, need: usize) -> Result<PseudoHole, String> {
+        let stride = self.points.len().div_ceil(MAX_CANDIDATES).max(1);
+        let mut best: Option<(usize, f32, PseudoHole)> = None;
+        for p in self.points.iter().step_by(stride) {
+            // the half-side that makes the cube's image as large as the mask, per masked view
+            let sizes: Vec<f32> = self
+                .masked
+                .iter()
+                .filter_map(|(k, side)| {
+                    let camera = &self.train[*k].camera;
+                    let (_, z) = camera.project(*p)?;
+                    Some(0.5 * scale * side * z / camera.fx)
+                })
+                .collect();
+            let Some(half) = median(sizes) else { continue };
+            let hole = PseudoHole::cube(*p, half);
+            let Some(whole) = self.fits(&hole, need) else {
+                continue;
+            };
+            let dist = self.object.map_or(0.0, |o| {
+                (0..3).map(|i| (p[i] - o[i]).powi(2)).sum::<f32>().sqrt()
+            });
+            let better = match &best {
+                None => true,
+                Some((n, d, _)) => whole > *n || (whole == *n && dist < *d),
+            };
+            if better {
+                best = Some((whole, dist, hole));
+            }
+        }
+        best.map(|(_, _, h)| h).ok_or_else(|| {
+            format!(
+                "no surface point keeps a pseudo-hole's image clear of the masks while {need} \
+                 masked views see it whole, down to {scale:.2} of the mask's size; give \
+                 lambda_rgb and lambda_normal numbers instead of \"auto\""
+            )
+        })
+    }
+
+    /// The number of masked views that see `hole` whole, when its image keeps its margin
+    /// from every view's mask and at least `need` masked views see it whole; else `None`.
+    fn fits(&self, hole: &PseudoHole, need: usize) -> Option<usize> {
+        let mut whole = 0;
+        for (v, integral) in self.train.iter().zip(&self.integrals) {
+            let (w, h) = (v.camera.width as f32, v.camera.height as f32);
+            let Some(r) = hole.image_rect(&v.camera) else {
+                // the camera is inside or beside the cube: no margin can be checked
+                return None;
+            };
+            if r[2] <= 0.0 || r[3] <= 0.0 || r[0] >= w || r[1] >= h {
+                continue;
+            }
+            let (Some(mask), Some(integral)) = (&v.mask, integral) else {
+                continue;
+            };
+            let (mx, my) = (MASK_MARGIN * (r[2] - r[0]), MASK_MARGIN * (r[3] - r[1]));
+            let grown = [r[0] - mx, r[1] - my, r[2] + mx, r[3] + my];
+            if count_in(integral, mask.width, mask.height, grown) > 0 {
+                return None;
+            }
+            if r[0] >= 0.0 && r[1] >= 0.0 && r[2] <= w && r[3] <= h {
+                whole += 1;
+            }
+        }
+        (whole >= need).then_some(whole)
+    }
 }
 
 /// The median of the surface points under the masks (the object's), if any.
@@ -370,7 +374,7 @@ fn object_centre(scene: &Scene, train: &[&View]) -> Option<[f32; 3]> {
     for v in train {
         for p in scene.sparse_depth.get(&v.name).into_iter().flatten() {
             if p.depth.is_finite() && p.depth > 0.0 && under_mask(v, p.x, p.y) {
-                pts.push(unproject(&v.camera, p.x, p.y, p.depth));
+                pts.push(v.camera.unproject(p.x, p.y, p.depth));
             }
         }
     }
@@ -424,7 +428,7 @@ mod tests {
         // the point just inside the cube projects into the region
         let ([x, y], _) = c.project([0.49, 0.49, 0.49]).unwrap();
         assert!(m.data[y as usize * 40 + x as usize]);
-        assert_eq!(unproject(&c, 30.0, 15.0, 4.0), [1.0, 0.0, 0.0]);
+        assert_eq!(c.unproject(30.0, 15.0, 4.0), [1.0, 0.0, 0.0]);
     }
 
     #[test]

@@ -154,17 +154,6 @@ pub struct TestedView {
     pub depth: Vec<f32>,
 }
 
-/// The world point at z-depth `depth` through the centre of pixel `(x, y)` of `cam`.
-fn surface_point(cam: &gb_nerf::scene::Camera, x: u32, y: u32, depth: f32) -> [f32; 3] {
-    let dc = [
-        (x as f32 + 0.5 - cam.cx) / cam.fx,
-        -(y as f32 + 0.5 - cam.cy) / cam.fy,
-        -1.0,
-    ];
-    let r = &cam.c2w;
-    [0, 1, 2].map(|i| r[i][3] + depth * (r[i][0] * dc[0] + r[i][1] * dc[1] + r[i][2] * dc[2]))
-}
-
 /// The geometry of [`carry`] on given depths: each tested pixel's surface point is projected
 /// into each reference view (`ref_depths[k]`: the z-depth map, `width * height`, that
 /// reference `k` renders, NaN where unknown); the first reference whose mask it lands in,
@@ -183,7 +172,7 @@ pub fn carry_from_depths(
         let cam = &views[t.view].camera;
         count += t.pixels.len();
         for ([x, y], d) in t.pixels.iter().zip(&t.depth) {
-            let point = surface_point(cam, *x, *y, *d);
+            let point = cam.unproject(*x as f32 + 0.5, *y as f32 + 0.5, *d);
             let hit = refs.iter().zip(ref_depths).find_map(|(r, map)| {
                 let rv = &views[r.view];
                 let rc = &rv.camera;

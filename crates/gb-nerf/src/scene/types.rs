@@ -42,6 +42,14 @@ impl Camera {
         [w[0] / n, w[1] / n, w[2] / n]
     }
 
+    /// The world point at continuous pixel coordinates `(px, py)` and z-depth `z`: the
+    /// inverse of [`Self::project`].
+    pub fn unproject(&self, px: f32, py: f32, z: f32) -> [f32; 3] {
+        let d = [(px - self.cx) / self.fx, -(py - self.cy) / self.fy, -1.0];
+        let r = &self.c2w;
+        [0, 1, 2].map(|i| r[i][3] + z * (r[i][0] * d[0] + r[i][1] * d[1] + r[i][2] * d[2]))
+    }
+
     /// Projects a world point to continuous pixel coordinates and its z-depth; `None` when
     /// the point is behind the camera.
     pub fn project(&self, p: [f32; 3]) -> Option<([f32; 2], f32)> {

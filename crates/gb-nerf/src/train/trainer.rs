@@ -219,22 +219,22 @@ impl Trainer {
         (rays, rgb, disp, valid)
     }
 
-    /// The reconstruction loss of one batch of unmasked training rays (RGB MSE, plus
-    /// `depth_weight` times the disparity loss where depth exists), with its autodiff graph.
     /// Withholds the pixels under `masks` from every loss ([`TrainData::withhold`]), e.g. a
     /// pseudo-hole that no view may see; call it before the first step. The checkpoint's data
-    /// fingerprint follows.
+    /// fingerprint then covers which pixels are left.
     pub fn withhold(&mut self, masks: &[Option<Mask>]) -> Result<(), NerfError> {
         self.data.withhold(masks)?;
-        let mut h = checkpoint::data_fingerprint(&self.data);
+        let mut h = gb_core::fingerprint::Fnv64::default();
+        h.word(checkpoint::data_fingerprint(&self.data));
         for p in &self.data.pixels {
-            h = (h ^ ((p.view as u64) << 40 | (p.y as u64) << 20 | p.x as u64))
-                .wrapping_mul(0x0000_0100_0000_01b3);
+            h.word((p.view as u64) << 40 | (p.y as u64) << 20 | p.x as u64);
         }
-        self.data_fingerprint = h;
+        self.data_fingerprint = h.finish();
         Ok(())
     }
 
+    /// The reconstruction loss of one batch of unmasked training rays (RGB MSE, plus
+    /// `depth_weight` times the disparity loss where depth exists), with its autodiff graph.
     /// Draws from the trainer's random stream; [`Self::apply_loss`] completes the step.
     pub fn reconstruction_loss(&mut self) -> ReconstructionLoss {
         let n = self.config.train.rays_per_batch;
