@@ -16,17 +16,20 @@
 //! 0.517 for training seeds 0 and 1), so the recorded tables are then the mean over seeds,
 //! each cell with its sample standard deviation and per-seed values, `vs_none` compares the
 //! means, and `wins_vs_none` counts the seeds on which each method beats that seed's `none`.
+//! Each seed's entry of `per_seed` also keeps, under `auto`, the pseudo-hole, trials, scores
+//! and choice of every run with `"auto"` weights, so the report holds them after `--work` is
+//! gone.
 //!
 //! `--oracle reference` adds the row `reference-oracle`, an upper bound that no real capture has: the
 //! `none` method with one reference view ([`gb_inpaint::reference`]) taken from the scene's
 //! `clean/` (the middle masked training view rendered without the object, exact ground
 //! truth). It answers whether the pipeline carries a perfect 2D fill of one view into 3D.
-//! `--oracle prior` adds `prior-oracle`: the default method with its prior personalised on `clean/`,
-//! every training view without the object, so that the prior knows the hidden region
-//! exactly and nothing else supervises it. It answers whether the distillation carries a
+//! `--oracle prior` adds `prior-oracle`: `gb-nerf-unseen` (the guided method at fixed
+//! weights) with its prior personalised on `clean/`, every training view without the
+//! object, so that the prior knows the hidden region exactly and nothing else supervises it. It answers whether the distillation carries a
 //! strong prior's knowledge into 3D, if personalisation makes the prior strong (with the
-//! tiny prior it does not: README). `--oracle score` adds `score-oracle`: the default
-//! method with its RGB score replaced by the exact score of the object-free images
+//! tiny prior it does not: README). `--oracle score` adds `score-oracle`:
+//! `gb-nerf-unseen` with its RGB score replaced by the exact score of the object-free images
 //! ([`gb_inpaint::oracle`]), the strongest prior there is; it separates the prior from the
 //! distillation for certain. Bare `--oracle` adds all three.
 //! `--fill-reference` adds `reference-fill`: the same view filled in 2D by the grid's prior
@@ -106,7 +109,7 @@ pub const PRIOR_ORACLE: &str = "prior-oracle";
 pub const SCORE_ORACLE: &str = "score-oracle";
 
 /// What `score-oracle` is, in the JSON.
-pub const SCORE_ORACLE_NOTE: &str = "ORACLE, not a method: the default method whose RGB score is \
+pub const SCORE_ORACLE_NOTE: &str = "ORACLE, not a method: gb-nerf-unseen whose RGB score is \
     the exact one of each guided view's object-free image (the scene's clean/; SDS with \
     guidance scale 1, lambda_rgb 1e-4), the normal term unchanged; no direct supervision";
 
@@ -163,7 +166,7 @@ pub fn write_reference_oracle(
     )
 }
 
-/// Writes `dir/prior-oracle.toml` (module docs): the default method
+/// Writes `dir/prior-oracle.toml` (module docs): the guided method at fixed weights
 /// ([`gb_inpaint::run::DEFAULT_METHOD`]) with its prior personalised
 /// ([`gb_inpaint::personalize`], [`PRIOR_ORACLE_STEPS`] steps) on the scene's `clean/`, every
 /// training view without the object: the prior then knows what the hole holds, and only the
@@ -181,11 +184,11 @@ pub fn write_prior_oracle(scene_dir: &Path, dir: &Path) -> anyhow::Result<PathBu
     write_method(dir, &method)
 }
 
-/// Writes `dir/score-oracle.toml` (module docs, [`SCORE_ORACLE_NOTE`]): the default method
+/// Writes `dir/score-oracle.toml` (module docs, [`SCORE_ORACLE_NOTE`]): the guided method
 /// with its RGB score replaced by the exact score of the object-free images
 /// ([`gb_inpaint::oracle`]): SDS at guidance scale 1, so that the direction is exactly the
 /// pull of the crop's latents to the truth's, at `lambda_rgb = 1e-4` (ten times the
-/// default's: the exact direction has no noise in it and is smaller than BSD's; the one
+/// gb-nerf-unseen's: the exact direction has no noise in it and is smaller than BSD's; the one
 /// weight tried, on tuning seed 100).
 pub fn write_score_oracle(scene_dir: &Path, dir: &Path) -> anyhow::Result<PathBuf> {
     use gb_diffusion::distill::{Branch, GuidanceMethod};
@@ -196,7 +199,7 @@ pub fn write_score_oracle(scene_dir: &Path, dir: &Path) -> anyhow::Result<PathBu
     let rgb = method
         .rgb
         .as_mut()
-        .ok_or_else(|| anyhow::anyhow!("the default method has no RGB guidance"))?;
+        .ok_or_else(|| anyhow::anyhow!("the guided method has no RGB guidance"))?;
     rgb.guidance = GuidanceMethod::Sds {
         guidance_scale: 1.0,
     };
@@ -363,6 +366,36 @@ fn mean_table(tables: &[Value]) -> Value {
     })
 }
 
+/// The `auto` section (pseudo-hole, trials, scores, choice) of each run under `runs` whose
+/// `metrics.json` has one, keyed by the run's folder name, so that a report keeps the weights
+/// each `"auto"` run chose after its scratch folder is gone. Runs without a readable
+/// `metrics.json` or without `auto` are left out.
+fn auto_choices(runs: &Path) -> Value {
+    let mut out = serde_json::Map::new();
+    let Ok(entries) = std::fs::read_dir(runs) else {
+        return out.into();
+    };
+    let mut dirs: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
+    dirs.sort();
+    for dir in dirs {
+        let Ok(text) = std::fs::read_to_string(dir.join("metrics.json")) else {
+            continue;
+        };
+        let Ok(metrics) = serde_json::from_str::<Value>(&text) else {
+            continue;
+        };
+        if metrics["auto"].is_object() {
+            let name = dir
+                .file_name()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .into_owned();
+            out.insert(name, metrics["auto"].clone());
+        }
+    }
+    out.into()
+}
+
 /// Runs the benchmark.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let stamp = std::time::SystemTime::now()
@@ -502,6 +535,7 @@ pub fn run_scene(
             "runs": runs.display().to_string(),
             "baselines": read("baselines.json")?,
             "ablation": read("ablation.json")?,
+            "auto": auto_choices(&runs),
         }));
     }
     let tables = |key: &str| -> Vec<Value> { per_seed.iter().map(|s| s[key].clone()).collect() };
@@ -527,7 +561,7 @@ pub fn run_scene(
                         "ORACLE, not a method: the none method with one training view's exact \
                          object-free image (the scene's clean/) as its reference view")),
                     OracleRow::Prior => (PRIOR_ORACLE.to_string(), json!(format!(
-                        "ORACLE, not a method: the default method with its prior personalised \
+                        "ORACLE, not a method: gb-nerf-unseen with its prior personalised \
                          ({PRIOR_ORACLE_STEPS} steps) on every training view's exact object-free \
                          image (the scene's clean/); no direct supervision"))),
                     OracleRow::Score => (SCORE_ORACLE.to_string(), json!(SCORE_ORACLE_NOTE)),
@@ -601,6 +635,26 @@ mod tests {
         assert_eq!(reference.reference.images.len(), 1);
         assert!(reference.reference.images[0].starts_with("view_003.png="));
         assert!(reference.reference.images[0].ends_with("scene/x.png"));
+    }
+
+    #[test]
+    fn auto_choices_keep_each_auto_runs_choice_by_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let write = |name: &str, body: &str| {
+            std::fs::create_dir_all(dir.path().join(name)).unwrap();
+            std::fs::write(dir.path().join(name).join("metrics.json"), body).unwrap();
+        };
+        write("none", r#"{"ssim_bbox": 0.5, "auto": null}"#);
+        write(
+            "gb-nerf-auto",
+            r#"{"auto": {"chosen": {"lambda_rgb": 1e-5}}}"#,
+        );
+        write("broken", "{");
+        let choices = auto_choices(dir.path());
+        let keys: Vec<&String> = choices.as_object().unwrap().keys().collect();
+        assert_eq!(keys, ["gb-nerf-auto"]);
+        assert_eq!(choices["gb-nerf-auto"]["chosen"]["lambda_rgb"], 1e-5);
+        assert_eq!(auto_choices(&dir.path().join("absent")), json!({}));
     }
 
     #[test]

@@ -373,6 +373,18 @@ pub fn choose_weights(
         });
     }
     let ranked_by = rank(&mut trials);
+    let left_out: Vec<&str> = METRICS
+        .iter()
+        .map(|(k, _)| *k)
+        .filter(|k| !ranked_by.iter().any(|r| r == k))
+        .collect();
+    if !left_out.is_empty() {
+        tracing::warn!(
+            ?left_out,
+            "auto weights: ranked without these metrics (their weights are missing: pass \
+             --weights DIR or set GB_TEST_DATA to the folder holding weights/)"
+        );
+    }
     let best = best_trial(&trials);
     let report = AutoReport {
         hole,
