@@ -5,7 +5,7 @@
 //! largest magnitude. The extremes: activations near 1e4 at t = 0.98 and 0.02 stay finite
 //! and close to f32.
 
-mod sd_image_common;
+use crate::sd_image_common;
 
 use burn::module::Module;
 use burn::tensor::{DType, Device, Tensor};

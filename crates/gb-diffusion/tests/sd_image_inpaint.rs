@@ -1,7 +1,7 @@
 //! The DDIM inpainting sampler against diffusers' `StableDiffusionInpaintPipeline` on the
 //! tiny fixture folder (3 steps, guidance 7.5, fixed initial latents).
 
-mod sd_image_common;
+use crate::sd_image_common;
 
 use gb_core::{heavy_test_backends, read_gray, read_rgb};
 use gb_diffusion::inpaint::{inpaint, prepare_conditioning, InpaintPrior, InpaintRequest};

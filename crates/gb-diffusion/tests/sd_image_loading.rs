@@ -1,6 +1,6 @@
 //! Loading errors, config validation and the VAE encoder under autodiff.
 
-mod sd_image_common;
+use crate::sd_image_common;
 
 use std::collections::HashMap;
 

@@ -1,7 +1,7 @@
 //! Parity of the U-Net and VAE with diffusers 0.42.1 on tiny random-weight models, on every
 //! test backend: max abs error 1e-4 in f32.
 
-mod sd_image_common;
+use crate::sd_image_common;
 
 use gb_core::heavy_test_backends;
 use gb_diffusion::models::{load_unet, load_vae};

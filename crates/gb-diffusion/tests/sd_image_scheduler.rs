@@ -1,6 +1,6 @@
 //! DDIM schedule and step against diffusers' `DDIMScheduler` (SD-1.5 config).
 
-mod sd_image_common;
+use crate::sd_image_common;
 
 use burn::tensor::Tensor;
 use gb_core::BackendKind;

@@ -1,7 +1,7 @@
 //! Checkpoint loading errors: a missing or misshaped tensor names the tensor, the
 //! expected shape and the file.
 
-mod sd_text_common;
+use crate::sd_text_common;
 
 use gb_diffusion::checkpoint::{DiffusersFolder, WeightVariant};
 use gb_diffusion::clip::load_text_encoder;

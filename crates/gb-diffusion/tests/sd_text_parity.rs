@@ -1,7 +1,7 @@
 //! CLIP text encoder and text-encoder LoRA parity with transformers / diffusers / peft on
 //! every test backend (fixtures: tools/parity/make_text_fixtures.py). Tolerance 1e-4, f32.
 
-mod sd_text_common;
+use crate::sd_text_common;
 
 use burn::module::Module;
 use burn::tensor::Device;

@@ -1,7 +1,7 @@
 //! Token ids of the CLIP tokenizer against transformers' `CLIPTokenizer` (fixture written
 //! by tools/parity/make_text_fixtures.py from the real CLIP vocabulary).
 
-mod sd_text_common;
+use crate::sd_text_common;
 
 use gb_diffusion::tokenizer::ClipTokenizer;
 use sd_text_common::{copy_dir, fixtures};

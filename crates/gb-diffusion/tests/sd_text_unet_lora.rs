@@ -3,7 +3,7 @@
 //! diffusers' output, unmerged and merged, on every test backend; and the file we write
 //! back reloads to the same output.
 
-mod sd_text_common;
+use crate::sd_text_common;
 
 use burn::tensor::{Tensor, TensorData};
 use gb_core::heavy_test_backends;

@@ -2,7 +2,7 @@
 //! "formula weights" (no LPIPS backbone weights exist here): both sides fill every tensor with
 //! the same closed-form values, see tools/eval_parity/make_fixtures.py.
 
-mod common;
+use crate::common;
 
 use std::collections::HashMap;
 use std::path::Path;

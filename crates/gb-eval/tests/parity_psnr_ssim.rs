@@ -2,7 +2,7 @@
 //! `tools/eval_parity/make_fixtures.py` (photo crops and procedural patterns with noise, blur,
 //! a 1-px shift and JPEG artefacts; constant and identical images).
 
-mod common;
+use crate::common;
 
 use common::{expected, fixture_dir, image, mask, number, Deviation};
 use gb_eval::disparity::{d_psnr, read_disparity, DepthKind};

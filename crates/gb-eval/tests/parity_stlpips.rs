@@ -1,7 +1,7 @@
 //! ST-LPIPS against stlpips-pytorch 0.0.2 (torch 2.15.0) on the same weights and fixtures,
 //! on every test backend.
 
-mod common;
+use crate::common;
 
 use common::{expected, image, number, Deviation};
 use gb_core::{heavy_test_backends, test_data_dir};

@@ -22,6 +22,8 @@ fn recipe_copy(dir: &Path) -> std::path::PathBuf {
 
 #[test]
 fn an_unreadable_autoencoder_loss_log_is_an_error_naming_it() {
+    // draws from Burn's process-global device RNG (crate::DEVICE_RNG)
+    let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let recipe = recipe_copy(dir.path());
     let out = dir.path().join("out");

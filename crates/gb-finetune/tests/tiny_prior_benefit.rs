@@ -42,6 +42,8 @@ fn held_out() -> SyntheticPairs {
 }
 
 fn report(lora: bool) -> ValidationReport {
+    // draws from Burn's process-global device RNG (crate::DEVICE_RNG)
+    let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     let dir = gb_core::tiny_prior_dir();
     let device = BackendKind::Flex.device();
     let val = held_out();

@@ -3,7 +3,6 @@
 //! resumed run equals an uninterrupted one, and a full run writes a loadable folder.
 
 use std::path::PathBuf;
-use std::sync::Mutex;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
@@ -17,8 +16,7 @@ use gb_finetune::train::batch::make_batch;
 use gb_finetune::train::loss::inpainting_loss;
 use gb_finetune::train::{FinetuneConfig, FinetuneTrainer, PriorModels, TrainTarget};
 
-/// Burn's device RNG (LoRA `A` init) is process-global: runs in this file are serialised.
-static LOCK: Mutex<()> = Mutex::new(());
+use crate::DEVICE_RNG as LOCK;
 
 fn prior_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

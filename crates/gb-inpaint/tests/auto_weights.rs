@@ -8,7 +8,6 @@
 //!   images, and 0 when the same pull points at noise.
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 
 use gb_core::{BackendKind, RgbImage};
 use gb_diffusion::distill::{Branch, GuidanceMethod, PriorInputMode};
@@ -19,8 +18,7 @@ use gb_nerf::scene::{LoadOptions, Scene, Split};
 use gb_nerf::train::data::TrainData;
 use gb_nerf::train::{DepthSupervision, NerfConfig};
 
-/// Field initialisation seeds a process-global device RNG: one test at a time.
-static LOCK: Mutex<()> = Mutex::new(());
+use crate::DEVICE_RNG as LOCK;
 
 const KIND: BackendKind = BackendKind::Flex;
 

@@ -46,6 +46,8 @@ fn json(path: &Path) -> serde_json::Value {
 
 #[test]
 fn export_reads_back_with_the_same_cameras_renders_and_orbit() {
+    // draws from Burn's process-global device RNG (crate::DEVICE_RNG)
+    let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let scene_dir = dir.path().join("scene");
     let opts = ProceduralOptions {

@@ -11,7 +11,6 @@
 //!   streak naming the last good checkpoint.
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 
 use burn::tensor::{Tensor, TensorData};
 use gb_core::BackendKind;
@@ -25,8 +24,7 @@ use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
 use gb_nerf::scene::{LoadOptions, Scene};
 use gb_nerf::train::{NerfConfig, Trainer};
 
-/// Field initialisation seeds a process-global device RNG: one test at a time.
-static LOCK: Mutex<()> = Mutex::new(());
+use crate::DEVICE_RNG as LOCK;
 
 const KIND: BackendKind = BackendKind::Flex;
 

@@ -4,7 +4,6 @@
 //! its cached LoRA until something it was trained from changes.
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 
 use gb_core::BackendKind;
 use gb_finetune::sample::PairSource;
@@ -16,8 +15,7 @@ use gb_inpaint::{GuidancePrior, InpaintError};
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
 use gb_nerf::scene::{LoadOptions, Scene, Split};
 
-/// Burn's device RNG (the adapters' init) is process-global: one test at a time.
-static LOCK: Mutex<()> = Mutex::new(());
+use crate::DEVICE_RNG as LOCK;
 
 fn scene(dir: &Path) -> Scene {
     let opts = ProceduralOptions {

@@ -11,7 +11,7 @@
 //! `gb_inpaint::visibility`.)
 
 use std::path::{Path, PathBuf};
-use std::sync::{Mutex, MutexGuard};
+use std::sync::MutexGuard;
 
 use burn::tensor::{Tensor, TensorData};
 use gb_core::BackendKind;
@@ -26,8 +26,7 @@ use gb_nerf::scene::{LoadOptions, Mask, Scene, Split};
 use gb_nerf::train::data::{TrainData, TrainView};
 use gb_nerf::train::{DepthSupervision, NerfConfig};
 
-/// Field initialisation seeds a process-global device RNG: one test at a time.
-static LOCK: Mutex<()> = Mutex::new(());
+use crate::DEVICE_RNG as LOCK;
 
 const KIND: BackendKind = BackendKind::Flex;
 

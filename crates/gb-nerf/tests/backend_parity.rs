@@ -1,7 +1,7 @@
 //! The field and the renderer give the same outputs and parameter gradients on every
 //! backend (ndarray, flex, wgpu/lavapipe) to a relative 1e-4, from identical parameters.
 
-mod nerf_common;
+use crate::nerf_common;
 use nerf_common as common;
 
 use burn::module::Module;
@@ -107,6 +107,8 @@ fn assert_close(kind: BackendKind, a: &[(String, Vec<f32>)], b: &[(String, Vec<f
 }
 
 fn check(config: FieldConfig) {
+    // draws from Burn's process-global device RNG (crate::DEVICE_RNG)
+    let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     let reference_device = BackendKind::Flex.autodiff_device();
     reference_device.seed(7);
     let reference = config.init(&reference_device);

@@ -2,7 +2,7 @@
 //! the depth, the occupancy grid saves field evaluations, checkpoints resume exactly, and
 //! the depth supervision is the one chosen (sparse points, dense maps or none).
 
-mod nerf_common;
+use crate::nerf_common;
 use nerf_common as common;
 
 use gb_core::BackendKind;
@@ -64,10 +64,7 @@ fn psnr(a: &[f32], b: &[f32]) -> f64 {
     -10.0 * mse.log10()
 }
 
-/// Trainers seed Burn's process-global device RNG before initialising the field, so two
-/// trainers built at the same time in one process interleave their draws. The tests that
-/// depend on the seeded initialisation hold this lock.
-static SEEDED_INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+use crate::DEVICE_RNG as SEEDED_INIT;
 
 #[test]
 fn training_fits_the_plane_depth_and_normals() {

@@ -1,7 +1,7 @@
 //! Volume rendering and normals at the numerical extremes: finite outputs and gradients,
 //! opacity in [0, 1], weights summing to at most 1 + 1e-6, documented empty-ray outputs.
 
-mod nerf_common;
+use crate::nerf_common;
 use nerf_common as common;
 
 use burn::tensor::{Tensor, TensorData};
@@ -111,6 +111,8 @@ fn one_sample_per_ray_stays_finite() {
 
 #[test]
 fn field_parameter_gradients_are_finite_at_extremes() {
+    // draws from Burn's process-global device RNG (crate::DEVICE_RNG)
+    let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     use burn::module::Module;
     use gb_nerf::render::render_samples;
     use gb_nerf::sampler::{sample_rays, RayBatch, SceneSpace};

@@ -6,8 +6,8 @@ use gb_diffusion::distill::{
     ScoreDistiller, TimestepConfig, ViewConditioning, Weighting,
 };
 
-use crate::fixture::sd_alphas;
-use crate::support::{
+use crate::distill::fixture::sd_alphas;
+use crate::distill::support::{
     host, max_abs, max_abs_diff, rand01, randn, tensor, wgpu_env, ConvEncoder, MockUnet,
 };
 

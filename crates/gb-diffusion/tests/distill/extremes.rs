@@ -7,8 +7,8 @@ use gb_diffusion::distill::{
     ViewConditioning, Weighting,
 };
 
-use crate::fixture::{half_mask, sd_alphas, Scene, LH, LW, TIMESTEP};
-use crate::support::{host, max_abs, tensor, LinearPoolEncoder, MockUnet, LATENT_C};
+use crate::distill::fixture::{half_mask, sd_alphas, Scene, LH, LW, TIMESTEP};
+use crate::distill::support::{host, max_abs, tensor, LinearPoolEncoder, MockUnet, LATENT_C};
 
 fn all_methods(w: f32) -> Vec<GuidanceMethod> {
     vec![
@@ -134,7 +134,7 @@ fn weights_up_to_100_stay_finite_and_scale_linearly() {
                 g.iter().chain(&image_grad).all(|v| v.is_finite()),
                 "{method:?}"
             );
-            let err = crate::support::max_abs_diff(&g, &expected);
+            let err = crate::distill::support::max_abs_diff(&g, &expected);
             assert!(
                 err <= 1e-5 * max_abs(&expected).max(1.0),
                 "{method:?} t={timestep}: {err}"
@@ -210,7 +210,8 @@ fn constant_image_gives_finite_gradients() {
             let g = host(out.gradient);
             assert!(image_grad.iter().all(|v| v.is_finite()));
             assert!(
-                crate::support::max_abs_diff(&g, &expected) <= 1e-5 * max_abs(&expected).max(1.0)
+                crate::distill::support::max_abs_diff(&g, &expected)
+                    <= 1e-5 * max_abs(&expected).max(1.0)
             );
         }
     }

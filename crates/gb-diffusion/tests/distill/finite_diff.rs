@@ -7,7 +7,7 @@ use gb_diffusion::distill::gradient::surrogate_loss;
 use gb_diffusion::distill::prior_input::crop_resize;
 use gb_diffusion::distill::{LatentEncoder, MaskBox};
 
-use crate::support::{host, rand01, randn, tensor, ConvEncoder, LATENT_C};
+use crate::distill::support::{host, rand01, randn, tensor, ConvEncoder, LATENT_C};
 
 #[test]
 fn encoder_gradient_matches_finite_differences() {

@@ -6,7 +6,7 @@ use gb_diffusion::distill::{
     PromptEmbeddings, ScoreDistiller, TimestepConfig, Weighting,
 };
 
-use crate::support::{host, rand01, randn, tensor, LinearPoolEncoder, MockUnet, LATENT_C};
+use crate::distill::support::{host, rand01, randn, tensor, LinearPoolEncoder, MockUnet, LATENT_C};
 
 pub const H: usize = 8;
 pub const W: usize = 8;
@@ -111,8 +111,9 @@ impl Scene {
             .zip(&self.noise)
             .map(|(z, n)| (ab.sqrt() as f32) * z + ((1.0 - ab).sqrt() as f32) * n)
             .collect();
-        let eps =
-            |m: f32| crate::support::mock_eps_host(&x_t, m, &self.mask, &self.masked, LH * LW);
+        let eps = |m: f32| {
+            crate::distill::support::mock_eps_host(&x_t, m, &self.mask, &self.masked, LH * LW)
+        };
         let (et, eu, en) = (eps(self.means[0]), eps(self.means[1]), eps(self.means[2]));
         let w = match weighting {
             Weighting::OneMinusAlphaBar => (1.0 - ab) as f32,

@@ -3,8 +3,8 @@
 use gb_core::BackendKind;
 use gb_diffusion::distill::{GuidanceMethod, Weighting};
 
-use crate::fixture::{half_mask, Scene, H, TIMESTEP, W};
-use crate::support::{host, max_abs, max_abs_diff, LinearPoolEncoder, MockUnet};
+use crate::distill::fixture::{half_mask, Scene, H, TIMESTEP, W};
+use crate::distill::support::{host, max_abs, max_abs_diff, LinearPoolEncoder, MockUnet};
 
 fn methods() -> Vec<GuidanceMethod> {
     vec![
@@ -54,7 +54,7 @@ fn gradient_reaching_the_image_equals_each_formula() {
                 err <= 1e-5 * max_abs(&expected_image).max(1.0),
                 "{method:?} {weighting:?}: image grad err {err}"
             );
-            let ab = crate::fixture::sd_alphas().at(TIMESTEP);
+            let ab = crate::distill::fixture::sd_alphas().at(TIMESTEP);
             let w = if weighting == Weighting::Constant {
                 1.0
             } else {

@@ -6,8 +6,8 @@ use gb_diffusion::distill::{
     ScoreDistiller, TimestepConfig, ViewConditioning, Weighting,
 };
 
-use crate::fixture::{half_mask, sd_alphas, Scene, LH, LW, TIMESTEP};
-use crate::support::{
+use crate::distill::fixture::{half_mask, sd_alphas, Scene, LH, LW, TIMESTEP};
+use crate::distill::support::{
     host, max_abs, rand01, randn, tensor, ConvEncoder, LinearPoolEncoder, MockUnet,
 };
 

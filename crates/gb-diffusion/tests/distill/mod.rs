@@ -1,4 +1,4 @@
-//! Score distillation tests: one test binary, one module per concern.
+//! Score distillation tests, one module per concern (a module of the crate's one test binary).
 
 mod backends;
 mod extremes;

@@ -4,9 +4,11 @@
 use gb_core::BackendKind;
 use gb_diffusion::distill::{Branch, GuidanceMethod, LatentTarget, OracleEps, Weighting};
 
-use crate::fixture::{half_mask, sd_alphas, Scene, LH, LW, TIMESTEP};
-use crate::support::LATENT_C;
-use crate::support::{host, max_abs, max_abs_diff, randn, tensor, LinearPoolEncoder, MockUnet};
+use crate::distill::fixture::{half_mask, sd_alphas, Scene, LH, LW, TIMESTEP};
+use crate::distill::support::LATENT_C;
+use crate::distill::support::{
+    host, max_abs, max_abs_diff, randn, tensor, LinearPoolEncoder, MockUnet,
+};
 use gb_diffusion::distill::LatentEncoder;
 
 /// One step of `method` on the scene's image with `unet`, at [`TIMESTEP`] and `noise`;
@@ -116,8 +118,13 @@ fn bsd_with_an_oracle_prompt_keeps_the_priors_negative() {
         .zip(&scene.noise)
         .map(|(z, e)| (a.sqrt() as f32) * z + ((1.0 - a).sqrt() as f32) * e)
         .collect();
-    let neg =
-        crate::support::mock_eps_host(&x_t, scene.means[2], &scene.mask, &scene.masked, LH * LW);
+    let neg = crate::distill::support::mock_eps_host(
+        &x_t,
+        scene.means[2],
+        &scene.mask,
+        &scene.masked,
+        LH * LW,
+    );
     let expected: Vec<f32> = (0..n)
         .map(|i| {
             let exact = (x_t[i] - (a.sqrt() as f32) * clean_values[i]) / ((1.0 - a).sqrt() as f32);

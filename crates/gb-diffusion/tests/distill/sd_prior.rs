@@ -13,7 +13,7 @@ use gb_diffusion::distill::{
 };
 use gb_diffusion::models::load_vae;
 
-use crate::support::{host, rand01, randn, tensor};
+use crate::distill::support::{host, rand01, randn, tensor};
 
 fn fixture(path: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
