@@ -3,6 +3,9 @@
 //! environment. The default job (the built-in tiny prior and the CLIP tokenizer, the
 //! generated stairs scene) must run from the assets embedded in the binary, and nothing it
 //! writes may name the source tree the binary was built from.
+//!
+//! Slow on purpose (about 100 s on 2 cores): it runs the whole default job, export and test
+//! renders included, because the property is about everything that job writes.
 
 use std::path::Path;
 use std::process::Command;

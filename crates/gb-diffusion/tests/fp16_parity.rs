@@ -4,6 +4,10 @@
 //! wgpu on lavapipe in CI). Tolerance: the largest difference at most 1e-2 of the reference's
 //! largest magnitude. The extremes: activations near 1e4 at t = 0.98 and 0.02 stay finite
 //! and close to f32.
+//!
+//! These are among the suite's slowest tests (92 to 274 s together on 2 cores): whole f16
+//! networks on wgpu, whose kernels lavapipe JIT-compiles. They stay: they are the only check
+//! of the f16 path that a GPU runs (SPIR-V f16), and CI has no GPU.
 
 use crate::sd_image_common;
 

@@ -92,6 +92,8 @@ mod tests {
 
     /// CLIP's 77-token causal attention through the fused op: within 1e-4 of the masked,
     /// materialised scores on every backend, and the first token sees only itself.
+    /// Slow on purpose (about 30-40 s): on wgpu, lavapipe JIT-compiles the causal kernel, and
+    /// this is its only check on wgpu; ndarray and flex take under 0.02 s.
     #[test]
     fn fused_causal_attention_matches_the_masked_scores() {
         for kind in gb_core::test_backends() {

@@ -107,6 +107,8 @@ mod tests {
 
     /// Self-attention over a 32x32 latent (long enough for flex's tiled kernel) and
     /// cross-attention over 77 tokens, on every backend: within 1e-4 of the materialised form.
+    /// Slow on purpose (about 40 s): on wgpu, lavapipe JIT-compiles the fused kernels, and this
+    /// is the fused self-attention's only check on wgpu; ndarray and flex take under 0.2 s.
     #[test]
     fn fused_attention_matches_the_materialised_scores() {
         for kind in gb_core::test_backends() {
