@@ -73,7 +73,11 @@ fn runs(
         out: out.clone(),
         ..gb_inpaint::RunSpec::default()
     };
-    let summary = gb_inpaint::run::run(&spec).unwrap_or_else(|e| panic!("{method}: {e}"));
+    let summary = {
+        // trains in-process from the seeded device RNG (crate::DEVICE_RNG)
+        let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
+        gb_inpaint::run::run(&spec).unwrap_or_else(|e| panic!("{method}: {e}"))
+    };
 
     let m = metrics(&out);
     // metrics.json is the returned summary, byte for byte (parsing it back may move a float

@@ -1,6 +1,8 @@
 //! The integration tests of this package, linked as one binary (`--test integration`):
 //! each file of this folder is a module, so a change relinks one test binary, not one per
-//! file. `cargo test --workspace --test integration -- MODULE::` runs one file's tests.
+//! file. `cargo test --workspace --test integration --test help -- MODULE::` runs one file's
+//! tests (`--test help` makes cargo build the `xtask` binary that the end-to-end tests run;
+//! the filter is a substring, so `resume::` also runs `recipe_resume::`).
 
 mod ablate;
 mod bad_input;
@@ -22,3 +24,9 @@ mod reference;
 mod report_browser;
 mod resume;
 mod scenes;
+
+/// Burn's device RNG is process-global, and trainers seed it before they initialise their
+/// parameters (the MLP's lazily, at the first step). Every test of this binary that trains
+/// in-process (not through the `xtask` binary) holds this lock while it does, so that no two
+/// interleave their draws (they were apart when each file was its own binary).
+pub static DEVICE_RNG: std::sync::Mutex<()> = std::sync::Mutex::new(());

@@ -128,6 +128,8 @@ fn masked_mse(render: &RgbImage, clean: &RgbImage, r: &ReferenceView) -> f64 {
 /// resumed from the checkpoint of step 60 continues with the same losses, bit for bit.
 #[test]
 fn a_reference_pulls_its_view_to_the_clean_image_and_a_resumed_run_continues_exactly() {
+    // trains in-process from the seeded device RNG (crate::DEVICE_RNG)
+    let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let (d, scene) = scene(dir.path());
     let preset = small_preset(dir.path(), None);
@@ -300,6 +302,8 @@ fn fill_pastes_the_prior_s_sample_into_the_mask_only() {
 /// reproducing command finds it from any folder), and no export is written or reported.
 #[test]
 fn a_run_with_a_reference_records_it_and_export_none_writes_no_export() {
+    // trains in-process from the seeded device RNG (crate::DEVICE_RNG)
+    let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let (d, scene) = scene(dir.path());
     let preset = small_preset(dir.path(), None);

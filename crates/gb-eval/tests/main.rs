@@ -1,6 +1,8 @@
 //! The integration tests of this package, linked as one binary (`--test integration`):
 //! each file of this folder is a module, so a change relinks one test binary, not one per
-//! file. `cargo test --workspace --test integration -- MODULE::` runs one file's tests.
+//! file. `cargo test --workspace --test integration --test help -- MODULE::` runs one file's
+//! tests (`--test help` makes cargo build the `xtask` binary that the end-to-end tests run;
+//! the filter is a substring, so `resume::` also runs `recipe_resume::`).
 
 mod brisque_parity;
 mod common;
