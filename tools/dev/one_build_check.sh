@@ -10,18 +10,17 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 features() {
     # "name vX.Y.Z|f1,f2" per package, its features unioned over every line the tree prints
-    # (with dev edges a package can appear in two builds with two feature sets)
+    # (with dev edges a package can appear in two builds with two feature sets) and sorted:
+    # one "package|feature" pair a line, sorted, then joined back per package
     cargo tree --offline --locked --prefix none --format '{p}|{f}' "$@" |
         sed -e 's/ (\*)$//' -e 's/ (proc-macro)//' |
-        awk -F'|' '{ n = split($2, f, ","); seen[$1] = 1
-                     for (i = 1; i <= n; i++) if (f[i] != "") feat[$1 "|" f[i]] = 1 }
-                   END { for (p in seen) { line = ""
-                           for (k in feat) { split(k, pf, "|"); if (pf[1] == p) line = line "," pf[2] }
-                           print p "|" substr(line, 2) } }' |
-        while IFS='|' read -r pkg feats; do
-            printf '%s|%s\n' "$pkg" "$(tr ',' '\n' <<<"$feats" | sort | paste -sd, -)"
-        done | sort
+        awk -F'|' '{ n = split($2, f, ","); print $1 "|"; for (i = 1; i <= n; i++) print $1 "|" f[i] }' |
+        sort -u |
+        awk -F'|' '$1 != p { if (NR > 1) print p "|" substr(l, 2); p = $1; l = "" }
+                   $2 != "" { l = l "," $2 }
+                   END { print p "|" substr(l, 2) }'
 }
+
 binary="$(features -p xtask -e normal,build)"
 tests="$(features --workspace -e normal,build,dev)"
 [ "$(printf '%s\n' "$binary" | grep -c '^burn ')" -ge 1 ] || {

@@ -26,8 +26,8 @@
 //! truth). It answers whether the pipeline carries a perfect 2D fill of one view into 3D.
 //! `--oracle prior` adds `prior-oracle`: `gb-nerf-unseen` (the guided method at fixed
 //! weights) with its prior personalised on `clean/`, every training view without the
-//! object, so that the prior knows the hidden region exactly and nothing else supervises it. It answers whether the distillation carries a
-//! strong prior's knowledge into 3D, if personalisation makes the prior strong (with the
+//! object, so that the prior knows the hidden region exactly and nothing else supervises
+//! it. It answers whether the distillation carries a strong prior's knowledge into 3D, if personalisation makes the prior strong (with the
 //! tiny prior it does not: README). `--oracle score` adds `score-oracle`:
 //! `gb-nerf-unseen` with its RGB score replaced by the exact score of the object-free images
 //! ([`gb_inpaint::oracle`]), the strongest prior there is; it separates the prior from the
@@ -366,34 +366,38 @@ fn mean_table(tables: &[Value]) -> Value {
     })
 }
 
-/// The `auto` section (pseudo-hole, trials, scores, choice) of each run under `runs` whose
-/// `metrics.json` has one, keyed by the run's folder name, so that a report keeps the weights
-/// each `"auto"` run chose after its scratch folder is gone. Runs without a readable
-/// `metrics.json` or without `auto` are left out.
-fn auto_choices(runs: &Path) -> Value {
-    let mut out = serde_json::Map::new();
-    let Ok(entries) = std::fs::read_dir(runs) else {
-        return out.into();
-    };
-    let mut dirs: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
+/// The `auto` section (pseudo-hole, trials, scores, choice) of each run folder under `runs`
+/// whose `metrics.json` has one, keyed by the folder's name, so that a report keeps the
+/// weights each `"auto"` run chose after its scratch folder is gone. A folder without
+/// `metrics.json` (a cell that did not finish) is left out; one that cannot be read or
+/// parsed is an error naming it.
+fn auto_choices(runs: &Path) -> anyhow::Result<Value> {
+    let mut dirs = Vec::new();
+    for entry in std::fs::read_dir(runs).with_context(|| format!("reading {}", runs.display()))? {
+        let entry = entry.with_context(|| format!("reading {}", runs.display()))?;
+        if entry.file_type().is_ok_and(|t| t.is_dir()) {
+            dirs.push((
+                entry.file_name().to_string_lossy().into_owned(),
+                entry.path(),
+            ));
+        }
+    }
     dirs.sort();
-    for dir in dirs {
-        let Ok(text) = std::fs::read_to_string(dir.join("metrics.json")) else {
-            continue;
+    let mut out = serde_json::Map::new();
+    for (name, dir) in dirs {
+        let path = dir.join("metrics.json");
+        let text = match std::fs::read_to_string(&path) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
         };
-        let Ok(metrics) = serde_json::from_str::<Value>(&text) else {
-            continue;
-        };
+        let metrics: Value =
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
         if metrics["auto"].is_object() {
-            let name = dir
-                .file_name()
-                .unwrap_or_default()
-                .to_string_lossy()
-                .into_owned();
             out.insert(name, metrics["auto"].clone());
         }
     }
-    out.into()
+    Ok(out.into())
 }
 
 /// Runs the benchmark.
@@ -535,7 +539,7 @@ pub fn run_scene(
             "runs": runs.display().to_string(),
             "baselines": read("baselines.json")?,
             "ablation": read("ablation.json")?,
-            "auto": auto_choices(&runs),
+            "auto": auto_choices(&runs)?,
         }));
     }
     let tables = |key: &str| -> Vec<Value> { per_seed.iter().map(|s| s[key].clone()).collect() };
@@ -649,12 +653,21 @@ mod tests {
             "gb-nerf-auto",
             r#"{"auto": {"chosen": {"lambda_rgb": 1e-5}}}"#,
         );
-        write("broken", "{");
-        let choices = auto_choices(dir.path());
+        std::fs::create_dir_all(dir.path().join("unfinished")).unwrap();
+        std::fs::write(dir.path().join("grid.toml"), "").unwrap();
+        let choices = auto_choices(dir.path()).unwrap();
         let keys: Vec<&String> = choices.as_object().unwrap().keys().collect();
         assert_eq!(keys, ["gb-nerf-auto"]);
         assert_eq!(choices["gb-nerf-auto"]["chosen"]["lambda_rgb"], 1e-5);
-        assert_eq!(auto_choices(&dir.path().join("absent")), json!({}));
+        // a broken metrics.json and a missing runs folder are errors naming them
+        write("broken", "{");
+        let err = format!("{:#}", auto_choices(dir.path()).unwrap_err());
+        assert!(err.contains("broken/metrics.json"), "{err}");
+        let err = format!(
+            "{:#}",
+            auto_choices(&dir.path().join("absent")).unwrap_err()
+        );
+        assert!(err.contains("absent"), "{err}");
     }
 
     #[test]
