@@ -29,6 +29,10 @@ pub struct GridArgs {
     /// Depth supervision of every run: sparse (the preset default), dense or none.
     #[arg(long)]
     pub depth: Option<DepthSupervision>,
+    /// Each run also writes `probe/`: the hidden region's depth error, normals and ray
+    /// weights per test view (`inpaint --probe`).
+    #[arg(long)]
+    pub probe: bool,
 }
 
 impl GridArgs {
@@ -49,6 +53,7 @@ impl GridArgs {
             weights: None,
             orbit_frames: 0,
             export: gb_inpaint::export::ExportMode::None,
+            probe: self.probe,
         }
     }
 }

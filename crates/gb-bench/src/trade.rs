@@ -219,6 +219,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             steps: None,
             device: args.device,
             depth: args.depth,
+            probe: false,
         };
         let label = preset_label(preset);
         let report = crate::quality::run_scene(

@@ -6,7 +6,7 @@
 //!     [--lora FILE] [--prompt P] [--negative-prompt N] [--normal-prompt G] [--device D]
 //!     [--precision f32|f16] [--out DIR] [--resume] [--steps N] [--seed N]
 //!     [--depth sparse|dense|none] [--personalize STEPS] [--baseline DIR] [--weights DIR]
-//!     [--orbit-frames N] [--reference VIEW=IMAGE ...] [--export full|none]
+//!     [--orbit-frames N] [--reference VIEW=IMAGE ...] [--export full|none] [--probe]
 //! ```
 //!
 //! - `--method`: a built-in method (`configs/methods/`: gb-nerf, gb-nerf-unseen, bsd,
@@ -48,6 +48,9 @@
 //!   orbit's `camera_path.json` for nerfstudio (`gb_inpaint::export`);
 //! - `orbit.gif`: the trained field along a closed path through the input cameras, at half
 //!   the training resolution (`--orbit-frames`, default 24; 0 for none; `gb_inpaint::gif`);
+//! - `probe/` (only with `--probe`): per test view, the mask box's render, truth,
+//!   disparities, signed depth error and normals (`NAME_probe.png`), the weights along four
+//!   hidden rays (`NAME_rays.svg`) and `probe.json` (`gb_inpaint::run::probe`);
 //! - `report.html` (+ `report/`): ground truth, our render, the baseline (`--baseline DIR`,
 //!   another run's folder; else the masked input, said so) and the difference per test view
 //!   (masked training views for a scene without test views), the orbit, the metric table
@@ -142,6 +145,11 @@ pub struct Args {
     /// Frames of the orbit animation `orbit.gif` (0: none).
     #[arg(long, default_value_t = 24)]
     pub orbit_frames: usize,
+    /// Also write `OUT/probe/`: per test view, the hidden region's depth error against the
+    /// truth, its normals and the weights along a few hidden rays (a diagnosis of the
+    /// filled geometry; needs a scene with true depth).
+    #[arg(long)]
+    pub probe: bool,
 }
 
 impl Args {
@@ -171,6 +179,7 @@ impl Args {
             weights: self.weights.clone(),
             orbit_frames: self.orbit_frames,
             export: self.export,
+            probe: self.probe,
             progress: true,
             program: crate::program_name().into(),
         }

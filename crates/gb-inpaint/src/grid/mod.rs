@@ -59,6 +59,9 @@ pub struct GridSettings {
     /// setting: full).
     #[serde(default, skip_serializing_if = "is_full_export")]
     pub export: crate::export::ExportMode,
+    /// Whether each run writes `probe/` ([`crate::run::probe`]; absent: no).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub probe: bool,
 }
 
 fn is_full_export(m: &crate::export::ExportMode) -> bool {
@@ -168,6 +171,7 @@ impl Grid {
             weights: s.weights.clone(),
             orbit_frames: s.orbit_frames,
             export: s.export,
+            probe: s.probe,
             ..RunSpec::default()
         })
     }

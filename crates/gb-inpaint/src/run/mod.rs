@@ -11,6 +11,7 @@
 //! (nerfstudio), `orbit.gif` and `report.html`.
 
 mod config_file;
+pub mod probe;
 mod setup;
 pub mod summary;
 mod test_views;
@@ -80,6 +81,9 @@ pub struct RunSpec {
     pub orbit_frames: usize,
     /// Whether to write the nerfstudio export (`--export`).
     pub export: crate::export::ExportMode,
+    /// Write `OUT/probe/`: the hidden region's depth error, normals and ray weights per
+    /// test view (`--probe`; [`probe`]).
+    pub probe: bool,
     /// Show progress bars.
     pub progress: bool,
     /// The command that runs `inpaint`, for `config.toml`'s reproducing line: `cargo xtask`
@@ -109,6 +113,7 @@ impl Default for RunSpec {
             weights: None,
             orbit_frames: 24,
             export: crate::export::ExportMode::Full,
+            probe: false,
             progress: false,
             program: "gb-nerf".into(),
         }
@@ -381,6 +386,18 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     } else {
         Vec::new()
     };
+    if spec.probe {
+        let report = probe::write_probe(&out.join("probe"), &scene, &trainer)?;
+        for v in &report.views {
+            tracing::info!(
+                view = %v.view,
+                hidden_mean_signed = v.hidden.mean_signed,
+                in_front = v.hidden_weights.in_front,
+                at_surface = v.hidden_weights.at_surface,
+                "probe"
+            );
+        }
+    }
     let render_seconds = render_start.elapsed().as_secs_f64();
     let eval_start = Instant::now();
     let renders: Vec<_> = train_views.iter().map(|t| t.render.clone()).collect();

@@ -3,6 +3,7 @@
 
 pub mod image;
 pub mod normals;
+pub mod profile;
 pub mod rays;
 pub mod termination;
 pub mod volume;
@@ -15,6 +16,7 @@ use crate::sampler::{sample_rays, OccupancyGrid, RayBatch, SampleSet, SceneSpace
 
 pub use image::{render_image, ImageRender};
 pub use normals::{depth_to_normals, normals_to_image, Intrinsics, PlaneFitConfig};
+pub use profile::{render_profiles, RayProfile};
 pub use volume::{composite, Background, VolumeOutput};
 
 /// Expands per-sample values `[M, C]` of the evaluated samples to the dense `[R * S, C]`

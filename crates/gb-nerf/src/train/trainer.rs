@@ -21,7 +21,7 @@ use super::{DepthSupervision, NerfConfig, NerfError};
 use crate::field::NerfField;
 use crate::render::image::{render_image, ImageRender, ImageSettings};
 use crate::render::rays::camera_rays;
-use crate::render::{render_rays, Background};
+use crate::render::{render_profiles, render_rays, Background, RayProfile};
 use crate::sampler::{normalized_positions, sample_rays, OccupancyGrid, RayBatch, SceneSpace};
 use crate::scene::{Camera, Mask, Scene};
 
@@ -521,22 +521,39 @@ impl Trainer {
         Ok(t)
     }
 
+    /// The settings of this field's image renders: its space, bounds, samples, occupancy
+    /// grid, background, normals and chunk.
+    pub fn image_settings(&self) -> ImageSettings<'_> {
+        ImageSettings {
+            space: &self.space,
+            near: self.near,
+            far: self.far,
+            samples_per_ray: self.config.sampler.samples_per_ray,
+            occupancy: self.occupancy.as_ref(),
+            background: self.background,
+            normals: self.config.render.normals,
+            chunk: self.config.render.chunk,
+        }
+    }
+
     /// Renders a whole image (no autodiff) with the configured normals; errors when a
     /// rendered tensor does not hold `f32` values.
     pub fn render(&self, camera: &Camera) -> Result<ImageRender, NerfError> {
-        Ok(render_image(
+        Ok(render_image(&self.field, camera, &self.image_settings())?)
+    }
+
+    /// The compositing weights along the rays through `pixels` of `camera`, sampled exactly
+    /// as [`Self::render`] samples them.
+    pub fn ray_profiles(
+        &self,
+        camera: &Camera,
+        pixels: &[[f32; 2]],
+    ) -> Result<Vec<RayProfile>, NerfError> {
+        Ok(render_profiles(
             &self.field,
             camera,
-            &ImageSettings {
-                space: &self.space,
-                near: self.near,
-                far: self.far,
-                samples_per_ray: self.config.sampler.samples_per_ray,
-                occupancy: self.occupancy.as_ref(),
-                background: self.background,
-                normals: self.config.render.normals,
-                chunk: self.config.render.chunk,
-            },
+            pixels,
+            &self.image_settings(),
         )?)
     }
 }

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Times the README's two commands from an empty target folder, xtask first:
+# `cargo xtask --help` (builds the gb-nerf binary, then prints its help), then
+# `cargo test --workspace --no-run` (the test build), and writes one JSON.
+# Usage: tools/dev/build_order.sh OUT.json [TARGET_DIR]
+# The crates must already be fetched (nothing is downloaded). Run it alone on the machine.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+out="$1"
+target="${2:-$(mktemp -d /tmp/gb-build-order.XXXXXX)}"
+rm -rf "$target" && mkdir -p "$target"
+export CARGO_TARGET_DIR="$target"
+timed() { # label, command...
+    local label="$1"; shift
+    local t0 t1 log
+    log="$(mktemp)"
+    t0=$(date +%s.%N)
+    "$@" >"$log" 2>&1
+    t1=$(date +%s.%N)
+    local n
+    n=$(grep -c '^ *Compiling ' "$log" || true)
+    printf '{"command": "%s", "wall_s": %.1f, "crates_compiled": %d}' \
+        "$label" "$(echo "$t1 - $t0" | bc)" "$n"
+    rm -f "$log"
+}
+first=$(timed "cargo xtask --help" cargo xtask --help)
+second=$(timed "cargo test --workspace --no-run" cargo test --workspace --no-run)
+cat >"$out" <<JSON
+{
+  "what": "the README's two commands from an empty target folder, xtask first, each alone on the machine",
+  "date": "$(date -u +%Y-%m-%dT%H:%M:%SZ)",
+  "machine": "$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)",
+  "commit": "$(git rev-parse --short HEAD)",
+  "rustc": "$(rustc --version)",
+  "steps": [$first, $second]
+}
+JSON
+rm -rf "$target"
+cat "$out"

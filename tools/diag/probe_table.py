@@ -1,0 +1,78 @@
+#!/usr/bin/env python3
+"""Pools the `probe/probe.json` of runs made with `--probe` (gb_inpaint::run::probe) into one
+table: per run, the hidden region's depth error and where its rays' weight lies, averaged over
+the test views, and the error of the observed surroundings.
+
+Usage: tools/diag/probe_table.py OUT.json LABEL=RUN_DIR [LABEL=RUN_DIR ...]
+
+Each RUN_DIR is a run folder (with probe/probe.json and metrics.json). Writes OUT.json and
+prints a Markdown table. Standard library only.
+"""
+import json
+import sys
+from pathlib import Path
+
+FIELDS = [
+    ("hidden", "mean_signed"),
+    ("hidden", "mean_abs"),
+    ("hidden", "within_tolerance"),
+    ("hidden_weights", "in_front"),
+    ("hidden_weights", "at_surface"),
+    ("hidden_weights", "behind"),
+    ("hidden_weights", "background"),
+    ("hidden_weights", "spread"),
+    ("hidden_weights", "two_surfaces"),
+    ("surroundings", "mean_signed"),
+    ("surroundings", "mean_abs"),
+    ("surroundings", "within_tolerance"),
+]
+
+
+def mean(xs):
+    return sum(xs) / len(xs) if xs else float("nan")
+
+
+def pool(run: Path) -> dict:
+    probe = json.loads((run / "probe" / "probe.json").read_text())
+    views = probe["views"]
+    row = {"run": str(run), "views": len(views), "tolerance": probe["tolerance"]}
+    for group, key in FIELDS:
+        row[f"{group}.{key}"] = mean([v[group][key] for v in views])
+    metrics = run / "metrics.json"
+    if metrics.is_file():
+        m = json.loads(metrics.read_text())
+        e = m.get("eval", {})
+        row["d_psnr_bbox"] = e.get("d_psnr_bbox")
+        row["lpips_bbox"] = e.get("lpips_bbox")
+        row["ssim_bbox"] = m.get("mean", {}).get("ssim_bbox")
+    return row
+
+
+def main() -> int:
+    if len(sys.argv) < 3:
+        print(__doc__, file=sys.stderr)
+        return 2
+    out = Path(sys.argv[1])
+    rows = {}
+    for arg in sys.argv[2:]:
+        label, _, run = arg.partition("=")
+        if not run:
+            print(f"probe_table.py: {arg}: expected LABEL=RUN_DIR", file=sys.stderr)
+            return 2
+        try:
+            rows[label] = pool(Path(run))
+        except (OSError, KeyError, json.JSONDecodeError) as e:
+            print(f"probe_table.py: {run}: {e}", file=sys.stderr)
+            return 1
+    out.write_text(json.dumps(rows, indent=2) + "\n")
+    cols = [f"{g}.{k}" for g, k in FIELDS] + ["ssim_bbox", "lpips_bbox", "d_psnr_bbox"]
+    print("| run | " + " | ".join(cols) + " |")
+    print("|---|" + "---:|" * len(cols))
+    for label, r in rows.items():
+        cells = [f"{r[c]:.3f}" if isinstance(r.get(c), (int, float)) else "" for c in cols]
+        print(f"| {label} | " + " | ".join(cells) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
