@@ -4,10 +4,17 @@
 # `cargo test --workspace --no-run` (the test build), and writes one JSON.
 # Usage: tools/dev/build_order.sh OUT.json [TARGET_DIR]
 # The crates must already be fetched (nothing is downloaded). Run it alone on the machine.
+# It builds a clean checkout of HEAD (a git worktree), so edits in progress do not leak in;
+# a failing command stops it.
 set -euo pipefail
+shopt -s inherit_errexit
 cd "$(dirname "$0")/../.."
-out="$1"
+out="$(realpath -m "$1")"
 target="${2:-$(mktemp -d /tmp/gb-build-order.XXXXXX)}"
+tree="$(mktemp -d /tmp/gb-build-order-tree.XXXXXX)"
+git worktree add --detach "$tree" HEAD >/dev/null
+trap 'git worktree remove --force "$tree"' EXIT
+cd "$tree"
 rm -rf "$target" && mkdir -p "$target"
 export CARGO_TARGET_DIR="$target"
 timed() { # label, command...
@@ -15,12 +22,13 @@ timed() { # label, command...
     local t0 t1 log
     log="$(mktemp)"
     t0=$(date +%s.%N)
-    "$@" >"$log" 2>&1
+    if ! "$@" >"$log" 2>&1; then
+        tail -20 "$log" >&2
+        echo "build_order.sh: $label failed" >&2
+        exit 1
+    fi
     t1=$(date +%s.%N)
-    local n
-    n=$(grep -c '^ *Compiling ' "$log" || true)
-    printf '{"command": "%s", "wall_s": %.1f, "crates_compiled": %d}' \
-        "$label" "$(echo "$t1 - $t0" | bc)" "$n"
+    printf '{"command": "%s", "wall_s": %.1f}' "$label" "$(echo "$t1 - $t0" | bc)"
     rm -f "$log"
 }
 first=$(timed "cargo xtask --help" cargo xtask --help)
