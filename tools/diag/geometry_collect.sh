@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Collects issue 49's runs of one scene (tools/diag/geometry_probe.sh, geometry_variants.sh):
+# the probe pictures of the first test view of each run into
+# bench/results/geometry-seed-100/figures/, and the pooled probe table into
+# bench/results/geometry-seed-100/probe-SCENE.json (tools/diag/probe_table.py).
+# Usage: tools/diag/geometry_collect.sh SCENE
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+scene="$1"
+grid="out/issue49/$scene/seed-100"
+dest="bench/results/geometry-seed-100"
+mkdir -p "$dest/figures"
+args=()
+for run in "$grid"/*/; do
+    run="${run%/}"
+    row="$(basename "$run")"
+    [ -f "$run/probe/probe.json" ] || continue
+    args+=("$row=$run")
+    first="$(ls "$run/probe/" | grep '_probe.png$' | head -1)"
+    view="${first%_probe.png}"
+    cp "$run/probe/${view}_probe.png" "$dest/figures/$scene-$row-${view}_probe.png"
+    cp "$run/probe/${view}_rays.svg" "$dest/figures/$scene-$row-${view}_rays.svg"
+done
+python3 tools/diag/probe_table.py "$dest/probe-$scene.json" "${args[@]}"

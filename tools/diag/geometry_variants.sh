@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Issue 49's fix, measured: the oracle rows of tools/diag/geometry_probe.sh again, each with a
+# [geometry] table (gb_inpaint::geometry) appended to its method file, run with --probe on
+# the same scene, seed and preset. Method files land in bench/results/geometry-seed-100/methods/,
+# runs in out/issue49/SCENE/seed-100/ROW-VARIANT/.
+# Usage: tools/diag/geometry_variants.sh SCENE VARIANT "TOML LINES" [ROW ...]
+#   e.g. tools/diag/geometry_variants.sh stairs depth1 "depth_weight = 1.0" reference-oracle
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+scene="$1" variant="$2" table="$3"
+shift 3
+rows=("$@")
+[ ${#rows[@]} -gt 0 ] || rows=(reference-oracle score-oracle)
+grid="out/issue49/$scene/seed-100"
+scene_dir="out/issue49/$scene-scene-seed-100"
+methods="bench/results/geometry-seed-100/methods"
+mkdir -p "$methods"
+for row in "${rows[@]}"; do
+    name="$scene-$row-$variant"
+    file="$methods/$name.toml"
+    sed -e "s/^name = \"$row\"/name = \"$row-$variant\"/" "$grid/$row.toml" > "$file"
+    printf '\n[geometry]\n%b\n' "$table" >> "$file"
+    cargo xtask inpaint --scene "$scene_dir" --method "$file" --seed 100 --preset fast \
+        --weights "${GB_TEST_DATA:-../shared}/weights" --export none --orbit-frames 0 --probe \
+        --out "$grid/$row-$variant"
+done
