@@ -15,6 +15,7 @@ mod docs_links;
 mod eval;
 mod finetune_cli;
 mod fuzz;
+mod geometry;
 mod grid;
 mod grid_slurm;
 mod inpaint_methods;

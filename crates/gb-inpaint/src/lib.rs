@@ -42,6 +42,7 @@ pub mod crop;
 pub mod error;
 pub mod export;
 pub mod fill;
+pub mod geometry;
 pub mod gif;
 pub mod grid;
 pub mod guidance;

@@ -309,6 +309,13 @@ pub struct MethodConfig {
         skip_serializing_if = "crate::reference::ReferenceConfig::is_default"
     )]
     pub reference: crate::reference::ReferenceConfig,
+    /// The hidden region's geometry held to the unguided field's ([`crate::geometry`]; off
+    /// by default). Left out of the written config while it is the default.
+    #[serde(
+        default,
+        skip_serializing_if = "crate::geometry::GeometryConfig::is_default"
+    )]
+    pub geometry: crate::geometry::GeometryConfig,
     /// Oracle guidance for experiments: the RGB term's prompt branch answered by the exact
     /// score of the object-free image (off by default; see [`crate::oracle`]). Left out of
     /// the written config while it is the default.
@@ -452,6 +459,9 @@ impl MethodConfig {
             }
         }
         if let Some(msg) = self.reference.check() {
+            return Err(msg);
+        }
+        if let Some(msg) = self.geometry.check() {
             return Err(msg);
         }
         for (table, settings) in [("rgb", &self.rgb), ("normal", &self.normal)] {

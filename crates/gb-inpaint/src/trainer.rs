@@ -238,6 +238,8 @@ pub struct GuidedTrainer {
     restored_carry: Option<CarriedSet>,
     /// Oracle guidance ([`Self::set_oracle`]; `None`: the prior answers).
     oracle: Option<crate::oracle::OracleTargets>,
+    /// The geometry term's targets ([`Self::set_hidden_depth`]; `None`: no term).
+    hidden_depth: Option<crate::geometry::HiddenDepth>,
     /// Counters of the whole run (restored on resume).
     pub totals: RunTotals,
     /// The run's identity ([`resume::identity`]), stored in checkpoints.
@@ -270,6 +272,8 @@ impl std::ops::DerefMut for GuidedTrainer {
 
 /// The salt of the reference term's random stream.
 const REFERENCE_SALT: u64 = 0x5EF;
+/// The salt of the geometry term's random stream.
+const GEOMETRY_SALT: u64 = 0x6E0;
 
 /// A seed for `(seed, step, salt)` (SplitMix64 finaliser).
 fn derive_seed(seed: u64, step: usize, salt: u64) -> u64 {
@@ -552,6 +556,7 @@ impl GuidedTrainer {
             reference: None,
             restored_carry: None,
             oracle: None,
+            hidden_depth: None,
             totals: RunTotals::default(),
             identity,
             nan_streak: 0,
@@ -560,6 +565,12 @@ impl GuidedTrainer {
                 .ok()
                 .and_then(|v| v.parse().ok()),
         })
+    }
+
+    /// Attaches the geometry term ([`crate::geometry`]): from now on every step holds the
+    /// hidden pixels' depth to `targets`.
+    pub fn set_hidden_depth(&mut self, targets: crate::geometry::HiddenDepth) {
+        self.hidden_depth = Some(targets);
     }
 
     /// Attaches oracle guidance ([`crate::oracle`]): the RGB term's chosen branches are
@@ -965,7 +976,14 @@ impl GuidedTrainer {
         let recon = self.nerf.reconstruction_loss();
         let (terms, records) = self.guidance_terms(step)?;
         let reference = self.reference_term(step)?;
+        let geometry = self.hidden_depth.as_ref().and_then(|h| {
+            let seed = derive_seed(self.nerf.config.train.seed, step, GEOMETRY_SALT);
+            h.loss(&self.render_context(), &self.nerf.data.views, seed)
+        });
         let mut loss = recon.loss.clone();
+        if let Some(g) = geometry {
+            loss = loss + g;
+        }
         for t in terms {
             loss = loss + t.loss;
         }

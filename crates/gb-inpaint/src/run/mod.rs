@@ -323,6 +323,17 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
             ckpt.display()
         );
     }
+    let hidden_depth = if method.geometry.enabled() {
+        Some(unguided_depth(
+            &scene,
+            &config,
+            &method,
+            device,
+            spec.progress,
+        )?)
+    } else {
+        None
+    };
     let guidance = prior.map(|p| (p, prompts.clone()));
     let mut trainer = if resuming {
         tracing::info!(path = %ckpt.display(), "resuming");
@@ -339,6 +350,9 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         );
     }
     trainer.set_references(references);
+    if let Some(h) = hidden_depth {
+        trainer.set_hidden_depth(h);
+    }
     if let Some(images) = oracle_images {
         tracing::warn!(
             views = images.iter().flatten().count(),
@@ -483,4 +497,33 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         orbit: summary.orbit.is_some(),
     })?;
     Ok(summary)
+}
+
+/// The geometry term's targets ([`crate::geometry`]): trains the field of `config` without
+/// any hidden-region term (the `none` method; the same seed, so the same initialisation and
+/// rays as `--method none`) and renders its depth through the hidden pixels.
+fn unguided_depth(
+    scene: &gb_nerf::scene::Scene,
+    config: &gb_nerf::train::NerfConfig,
+    method: &crate::MethodConfig,
+    device: gb_core::BackendKind,
+    progress: bool,
+) -> Result<crate::geometry::HiddenDepth, InpaintError> {
+    let start = Instant::now();
+    let none = crate::MethodConfig::builtin("none")?;
+    let mut unguided = GuidedTrainer::new(scene, config.clone(), none, None, device)?;
+    unguided.fit(&FitOptions {
+        checkpoint: None,
+        log: None,
+        append_log: false,
+        progress,
+    })?;
+    let targets =
+        crate::geometry::HiddenDepth::from_field(&unguided.nerf, method.geometry.clone())?;
+    tracing::info!(
+        pixels = targets.pixels.len(),
+        seconds = start.elapsed().as_secs_f64(),
+        "geometry: the unguided field's depth through the masked pixels"
+    );
+    Ok(targets)
 }

@@ -1,0 +1,288 @@
+//! Geometry that survives the fill (issue 49): the hidden region's depth comes from the
+//! reconstruction, its colour from the fill.
+//!
+//! Without any supervision of the hidden region (`--method none`), the field's depth behind
+//! the object is interpolated by the hash grid and pinned by the views that see the surface;
+//! every colour term inside the mask (a reference view, the RGB guidance, the normal
+//! guidance) moves that geometry, even when the colour it asks for is exact. With
+//! `[geometry] depth_weight > 0`, a run first trains the same field without any hidden-region
+//! term (exactly the `none` run of its preset and seed: same initialisation, same rays) and
+//! keeps its depth through the masked pixels of every training view (at most
+//! `max_pixels_per_view` a view, on a stride grid). Then, on every step of the run, `rays`
+//! rays drawn from those pixels carry the disparity loss of the reconstruction toward that
+//! depth (weight `depth_weight`), and the distortion loss of mip-NeRF 360 (weight
+//! `distortion_weight`) keeps their weights on one surface. The unguided field is computed
+//! again on resume (it is deterministic), so checkpoints do not hold it.
+
+use burn::tensor::{Tensor, TensorData};
+use gb_nerf::render::rays::camera_rays;
+use gb_nerf::render::{render_samples, sample_and_prune};
+use gb_nerf::sampler::{normalized_positions, RayBatch};
+use gb_nerf::train::data::TrainView;
+use gb_nerf::train::losses::{disparity_loss, distortion_loss};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::crop::RenderContext;
+use crate::error::InpaintError;
+
+/// `[geometry]` of a method (module docs). Off by default.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GeometryConfig {
+    /// Weight of the disparity loss of the hidden rays toward the unguided field's depth
+    /// (0: off; the reconstruction's own depth loss has 0.1 in every preset).
+    #[serde(default)]
+    pub depth_weight: f64,
+    /// Weight of the distortion loss on the same rays (0: off).
+    #[serde(default)]
+    pub distortion_weight: f64,
+    /// Rays per step through the masked pixels.
+    #[serde(default = "default_rays")]
+    pub rays: usize,
+    /// At most this many masked pixels of each training view are kept (a stride grid).
+    #[serde(default = "default_max_pixels")]
+    pub max_pixels_per_view: usize,
+}
+
+fn default_rays() -> usize {
+    256
+}
+fn default_max_pixels() -> usize {
+    4096
+}
+
+impl Default for GeometryConfig {
+    fn default() -> Self {
+        Self {
+            depth_weight: 0.0,
+            distortion_weight: 0.0,
+            rays: default_rays(),
+            max_pixels_per_view: default_max_pixels(),
+        }
+    }
+}
+
+impl GeometryConfig {
+    /// True for the default table (off).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// True when either loss has a weight.
+    pub fn enabled(&self) -> bool {
+        self.depth_weight > 0.0 || self.distortion_weight > 0.0
+    }
+
+    /// A message naming the first invalid field, if any.
+    pub fn check(&self) -> Option<String> {
+        for (name, v) in [
+            ("depth_weight", self.depth_weight),
+            ("distortion_weight", self.distortion_weight),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Some(format!(
+                    "geometry.{name} = {v} must be a finite number >= 0"
+                ));
+            }
+        }
+        if self.rays == 0 {
+            return Some("geometry.rays must be >= 1".into());
+        }
+        if self.max_pixels_per_view == 0 {
+            return Some("geometry.max_pixels_per_view must be >= 1".into());
+        }
+        None
+    }
+}
+
+/// One masked training pixel and the unguided field's depth through it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HiddenPixel {
+    /// Training view index.
+    pub view: usize,
+    /// Pixel centre.
+    pub pixel: [f32; 2],
+    /// The unguided field's z-depth (non-positive or non-finite: none).
+    pub depth: f32,
+}
+
+/// The masked pixels of the training views kept for the geometry term: every
+/// `stride`-th masked pixel of each view, at most `max` a view.
+pub fn hidden_pixels(views: &[TrainView], max: usize) -> Vec<(usize, Vec<[f32; 2]>)> {
+    let mut out = Vec::new();
+    for (k, v) in views.iter().enumerate() {
+        let Some(mask) = &v.mask else { continue };
+        let masked: Vec<usize> = (0..mask.data.len()).filter(|&i| mask.data[i]).collect();
+        if masked.is_empty() {
+            continue;
+        }
+        let stride = masked.len().div_ceil(max.max(1));
+        let w = mask.width;
+        let pixels = masked
+            .iter()
+            .step_by(stride)
+            .map(|&i| [(i % w) as f32 + 0.5, (i / w) as f32 + 0.5])
+            .collect();
+        out.push((k, pixels));
+    }
+    out
+}
+
+/// The geometry term's targets: the unguided field's depth through the hidden pixels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HiddenDepth {
+    /// The settings.
+    pub config: GeometryConfig,
+    /// The pixels and their depths.
+    pub pixels: Vec<HiddenPixel>,
+}
+
+impl HiddenDepth {
+    /// Renders the depth of `field` (an unguided trainer) through the hidden pixels.
+    pub fn from_field(
+        unguided: &gb_nerf::train::Trainer,
+        config: GeometryConfig,
+    ) -> Result<Self, InpaintError> {
+        let mut pixels = Vec::new();
+        for (view, px) in hidden_pixels(&unguided.data.views, config.max_pixels_per_view) {
+            let profiles = unguided.ray_profiles(&unguided.data.views[view].camera, &px)?;
+            pixels.extend(profiles.iter().map(|p| HiddenPixel {
+                view,
+                pixel: p.pixel,
+                depth: p.depth,
+            }));
+        }
+        Ok(Self { config, pixels })
+    }
+
+    /// The term of one step (module docs), drawn from a stream seeded by `seed`; `None`
+    /// without pixels.
+    pub fn loss(
+        &self,
+        ctx: &RenderContext<'_>,
+        views: &[TrainView],
+        seed: u64,
+    ) -> Option<Tensor<1>> {
+        if self.pixels.is_empty() || !self.config.enabled() {
+            return None;
+        }
+        let n = self.config.rays;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut rays = RayBatch::default();
+        let mut target = Vec::with_capacity(2 * n);
+        for _ in 0..n {
+            let p = self.pixels[rng.random_range(0..self.pixels.len())];
+            let valid = p.depth.is_finite() && p.depth > 0.0;
+            target.push(if valid { ctx.near / p.depth } else { 0.0 });
+            target.push(if valid { 1.0 } else { 0.0 });
+            let r = camera_rays(
+                &views.get(p.view)?.camera,
+                &[p.pixel],
+                ctx.space,
+                ctx.near,
+                ctx.far,
+            );
+            rays.origins.extend(r.origins);
+            rays.dirs.extend(r.dirs);
+            rays.near.extend(r.near);
+            rays.far.extend(r.far);
+        }
+        let device = ctx.field.device();
+        let samples = sample_and_prune(
+            ctx.field,
+            &rays,
+            ctx.space,
+            ctx.samples_per_ray,
+            ctx.occupancy,
+            Some(&mut rng),
+        );
+        let out = render_samples(ctx.field, &samples, ctx.background);
+        let mut loss = Tensor::<1>::zeros([1], &device);
+        if self.config.depth_weight > 0.0 {
+            let pairs = Tensor::<2>::from_data(TensorData::new(target, [n, 2]), &device);
+            let gt = pairs.clone().slice([0..n, 0..1]).reshape([n]);
+            let valid = pairs.slice([0..n, 1..2]).reshape([n]);
+            let d = disparity_loss(out.disparity, gt, valid, ctx.near);
+            loss = loss + d.mul_scalar(self.config.depth_weight);
+        }
+        if self.config.distortion_weight > 0.0 {
+            let s = samples.samples;
+            let u = normalized_positions(&rays, &samples, ctx.space.spacing());
+            let u = Tensor::<2>::from_data(TensorData::new(u, [n, s]), &device);
+            let width = Tensor::<2>::full([n, s], 1.0 / s as f32, &device);
+            let dl = distortion_loss(out.weights, u, width);
+            loss = loss + dl.mul_scalar(self.config.distortion_weight);
+        }
+        Some(loss)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gb_core::RgbImage;
+    use gb_nerf::scene::{Camera, Mask};
+
+    fn view(mask: Option<Vec<bool>>) -> TrainView {
+        TrainView {
+            camera: Camera {
+                width: 4,
+                height: 2,
+                fx: 4.0,
+                fy: 4.0,
+                cx: 2.0,
+                cy: 1.0,
+                c2w: [
+                    [1.0, 0.0, 0.0, 0.0],
+                    [0.0, 1.0, 0.0, 0.0],
+                    [0.0, 0.0, 1.0, 0.0],
+                ],
+            },
+            image: RgbImage::filled(4, 2, [0.5; 3]),
+            mask: mask.map(|data| Mask {
+                width: 4,
+                height: 2,
+                data,
+            }),
+            depth: None,
+        }
+    }
+
+    #[test]
+    fn hidden_pixels_keep_a_stride_grid_of_each_masked_view() {
+        let all = vec![true; 8];
+        let mut one = vec![false; 8];
+        one[6] = true;
+        let views = [
+            view(Some(all)),
+            view(None),
+            view(Some(vec![false; 8])),
+            view(Some(one)),
+        ];
+        let got = hidden_pixels(&views, 3);
+        assert_eq!(got.len(), 2);
+        // 8 masked pixels, at most 3: stride 3, pixels 0, 3, 6
+        assert_eq!(got[0], (0, vec![[0.5, 0.5], [3.5, 0.5], [2.5, 1.5]]));
+        assert_eq!(got[1], (3, vec![[2.5, 1.5]]));
+    }
+
+    #[test]
+    fn the_default_is_off_and_bad_fields_are_named() {
+        let d = GeometryConfig::default();
+        assert!(d.is_default() && !d.enabled() && d.check().is_none());
+        let on = GeometryConfig {
+            depth_weight: 1.0,
+            ..d.clone()
+        };
+        assert!(on.enabled() && !on.is_default());
+        let bad = GeometryConfig {
+            distortion_weight: f64::NAN,
+            ..d.clone()
+        };
+        assert!(bad.check().unwrap().contains("geometry.distortion_weight"));
+        let bad = GeometryConfig { rays: 0, ..d };
+        assert!(bad.check().unwrap().contains("geometry.rays"));
+    }
+}
