@@ -35,7 +35,7 @@ use gb_nerf::render::{
     density_gradient_normals, depth_to_normals, render_samples, render_samples_appearance_only,
     sample_and_prune, Background, Intrinsics, PlaneFitConfig,
 };
-use gb_nerf::sampler::{OccupancyGrid, SceneSpace};
+use gb_nerf::sampler::{OccupancyGrid, RayBatch, SceneSpace};
 use gb_nerf::scene::{Camera, Mask};
 use gb_nerf::train::data::TrainView;
 use rand_chacha::ChaCha8Rng;
@@ -200,6 +200,32 @@ pub struct RenderContext<'a> {
     /// Whether the RGB prior input's graph reaches only the colour head (the method's
     /// `rgb_moves_geometry = false`); the normal map always reaches the geometry.
     pub rgb_appearance_only: bool,
+}
+
+impl RenderContext<'_> {
+    /// The ray of `camera` through the continuous pixel `pixel`, within the scene's bounds.
+    pub fn ray_through(&self, camera: &Camera, pixel: [f32; 2]) -> RayBatch {
+        camera_rays(camera, &[pixel], self.space, self.near, self.far)
+    }
+}
+
+/// The reconstruction's disparity loss ([`gb_nerf::train::losses::disparity_loss`]) of
+/// `disparity [n]` toward depths given as `(near / depth, valid)` pairs, flattened.
+pub fn disparity_toward(disparity: Tensor<1>, pairs: Vec<f32>, near: f32) -> Tensor<1> {
+    let n = pairs.len() / 2;
+    let pairs = Tensor::<2>::from_data(TensorData::new(pairs, [n, 2]), &disparity.device());
+    let gt = pairs.clone().slice([0..n, 0..1]).reshape([n]);
+    let valid = pairs.slice([0..n, 1..2]).reshape([n]);
+    gb_nerf::train::losses::disparity_loss(disparity, gt, valid, near)
+}
+
+/// The `(near / depth, valid)` pair of a target depth (invalid when not a positive number).
+pub fn disparity_pair(near: f32, depth: f32) -> [f32; 2] {
+    if depth.is_finite() && depth > 0.0 {
+        [near / depth, 1.0]
+    } else {
+        [0.0, 0.0]
+    }
 }
 
 /// The per-view constants of the RGB guidance, computed once per view.

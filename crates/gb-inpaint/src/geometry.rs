@@ -14,17 +14,16 @@
 //! `distortion_weight`) keeps their weights on one surface. The unguided field is computed
 //! again on resume (it is deterministic), so checkpoints do not hold it.
 
-use burn::tensor::{Tensor, TensorData};
-use gb_nerf::render::rays::camera_rays;
+use burn::tensor::Tensor;
 use gb_nerf::render::{render_samples, sample_and_prune};
-use gb_nerf::sampler::{normalized_positions, RayBatch};
+use gb_nerf::sampler::RayBatch;
 use gb_nerf::train::data::TrainView;
-use gb_nerf::train::losses::{disparity_loss, distortion_loss};
+use gb_nerf::train::losses::distortion_of;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::crop::RenderContext;
+use crate::crop::{disparity_pair, disparity_toward, RenderContext};
 use crate::error::InpaintError;
 
 /// `[geometry]` of a method (module docs). Off by default.
@@ -174,22 +173,9 @@ impl HiddenDepth {
         let mut target = Vec::with_capacity(2 * n);
         for _ in 0..n {
             let p = self.pixels[rng.random_range(0..self.pixels.len())];
-            let valid = p.depth.is_finite() && p.depth > 0.0;
-            target.push(if valid { ctx.near / p.depth } else { 0.0 });
-            target.push(if valid { 1.0 } else { 0.0 });
-            let r = camera_rays(
-                &views.get(p.view)?.camera,
-                &[p.pixel],
-                ctx.space,
-                ctx.near,
-                ctx.far,
-            );
-            rays.origins.extend(r.origins);
-            rays.dirs.extend(r.dirs);
-            rays.near.extend(r.near);
-            rays.far.extend(r.far);
+            target.extend(disparity_pair(ctx.near, p.depth));
+            rays.append(ctx.ray_through(&views.get(p.view)?.camera, p.pixel));
         }
-        let device = ctx.field.device();
         let samples = sample_and_prune(
             ctx.field,
             &rays,
@@ -199,20 +185,13 @@ impl HiddenDepth {
             Some(&mut rng),
         );
         let out = render_samples(ctx.field, &samples, ctx.background);
-        let mut loss = Tensor::<1>::zeros([1], &device);
+        let mut loss = Tensor::<1>::zeros([1], &ctx.field.device());
         if self.config.depth_weight > 0.0 {
-            let pairs = Tensor::<2>::from_data(TensorData::new(target, [n, 2]), &device);
-            let gt = pairs.clone().slice([0..n, 0..1]).reshape([n]);
-            let valid = pairs.slice([0..n, 1..2]).reshape([n]);
-            let d = disparity_loss(out.disparity, gt, valid, ctx.near);
+            let d = disparity_toward(out.disparity, target, ctx.near);
             loss = loss + d.mul_scalar(self.config.depth_weight);
         }
         if self.config.distortion_weight > 0.0 {
-            let s = samples.samples;
-            let u = normalized_positions(&rays, &samples, ctx.space.spacing());
-            let u = Tensor::<2>::from_data(TensorData::new(u, [n, s]), &device);
-            let width = Tensor::<2>::full([n, s], 1.0 / s as f32, &device);
-            let dl = distortion_loss(out.weights, u, width);
+            let dl = distortion_of(out.weights, &rays, &samples, ctx.space.spacing());
             loss = loss + dl.mul_scalar(self.config.distortion_weight);
         }
         Some(loss)

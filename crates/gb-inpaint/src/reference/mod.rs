@@ -42,17 +42,15 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::{Tensor, TensorData};
 use gb_core::RgbImage;
-use gb_nerf::render::rays::camera_rays;
 use gb_nerf::render::{render_samples, render_samples_fixed_geometry, sample_and_prune};
 use gb_nerf::sampler::RayBatch;
 use gb_nerf::scene::{Scene, Split};
 use gb_nerf::train::data::{downscale_image, TrainView};
-use gb_nerf::train::losses::disparity_loss;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::crop::RenderContext;
+use crate::crop::{disparity_pair, disparity_toward, RenderContext};
 use crate::error::InpaintError;
 pub use carry::{CarriedPixel, CarriedSet};
 
@@ -444,16 +442,9 @@ impl ReferenceState {
                     .unwrap_or(0.0);
                 (r.view, x, y, r.image.get(x as usize, y as usize), depth)
             };
-            let valid = depth.is_finite() && depth > 0.0;
-            anchor.push(if valid { ctx.near / depth } else { 0.0 });
-            anchor.push(if valid { 1.0 } else { 0.0 });
-            let cam = &views.get(view)?.camera;
+            anchor.extend(disparity_pair(ctx.near, depth));
             let px = [x as f32 + 0.5, y as f32 + 0.5];
-            let r = camera_rays(cam, &[px], ctx.space, ctx.near, ctx.far);
-            rays.origins.extend(r.origins);
-            rays.dirs.extend(r.dirs);
-            rays.near.extend(r.near);
-            rays.far.extend(r.far);
+            rays.append(ctx.ray_through(&views.get(view)?.camera, px));
             target.extend_from_slice(&rgb);
         }
         let device = ctx.field.device();
@@ -474,10 +465,7 @@ impl ReferenceState {
         let diff = out.rgb - target;
         let mut loss = (diff.clone() * diff).mean().mul_scalar(self.config.weight);
         if self.config.anchor_weight > 0.0 {
-            let pairs = Tensor::<2>::from_data(TensorData::new(anchor, [n, 2]), &device);
-            let gt = pairs.clone().slice([0..n, 0..1]).reshape([n]);
-            let valid = pairs.slice([0..n, 1..2]).reshape([n]);
-            let d = disparity_loss(out.disparity, gt, valid, ctx.near);
+            let d = disparity_toward(out.disparity, anchor, ctx.near);
             loss = loss + d.mul_scalar(self.config.anchor_weight);
         }
         Some(ReferenceTerm {

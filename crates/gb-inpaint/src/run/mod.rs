@@ -401,7 +401,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         Vec::new()
     };
     if spec.probe {
-        let report = probe::write_probe(&out.join("probe"), &scene, &trainer)?;
+        let report = probe::write_probe(&out.join("probe"), &scene, &trainer, &tested.renders)?;
         for v in &report.views {
             tracing::info!(
                 view = %v.view,

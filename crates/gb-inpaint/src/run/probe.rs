@@ -19,7 +19,7 @@
 use std::path::Path;
 
 use gb_core::RgbImage;
-use gb_nerf::render::{normals_to_image, RayProfile};
+use gb_nerf::render::{normals_to_image, ImageRender, RayProfile};
 use gb_nerf::scene::{Scene, Split};
 use gb_nerf::train::data::prepare_view;
 use gb_nerf::train::output::turbo;
@@ -109,22 +109,23 @@ pub struct ProbeReport {
     pub views: Vec<ViewProbe>,
 }
 
-/// Probes the test views of `scene` rendered by `trainer` and writes `dir` (module docs).
+/// Probes the test views of `scene` rendered by `trainer` (their renders `renders`, in the
+/// scene's test order) and writes `dir` (module docs).
 pub fn write_probe(
     dir: &Path,
     scene: &Scene,
     trainer: &GuidedTrainer,
+    renders: &[ImageRender],
 ) -> Result<ProbeReport, InpaintError> {
     std::fs::create_dir_all(dir).map_err(|e| InpaintError::io(dir, e))?;
     let mut views = Vec::new();
-    for view in scene.split(Split::Test) {
+    for (view, render) in scene.split(Split::Test).zip(renders) {
         let v = prepare_view(view, trainer.config.train.image_downscale);
         let (Some(mask), Some(truth)) = (v.mask.as_ref(), v.depth.as_ref()) else {
             continue;
         };
         let Some(bbox) = mask.bbox() else { continue };
         let (w, h) = (v.image.width, v.image.height);
-        let render = trainer.render(&v.camera)?;
         let valid = |i: usize| truth[i].is_finite() && truth[i] > 0.0;
         let hidden: Vec<usize> = (0..w * h).filter(|&i| mask.data[i] && valid(i)).collect();
         let around = grown_box(bbox, w, h);
@@ -152,7 +153,7 @@ pub fn write_probe(
         let stem = Path::new(&view.name)
             .file_stem()
             .map_or_else(|| view.name.clone(), |s| s.to_string_lossy().into_owned());
-        let picture = probe_picture(&v.image, &render, truth, around);
+        let picture = probe_picture(&v.image, render, truth, around);
         let png = dir.join(format!("{stem}_probe.png"));
         gb_core::write_rgb_png(&png, &picture)
             .map_err(|e| InpaintError::io(&png, std::io::Error::other(e.to_string())))?;
@@ -255,7 +256,7 @@ fn error_colour(e: f32) -> [f32; 3] {
 /// The picture of the module docs: six panels of the box `around`, side by side.
 fn probe_picture(
     truth_rgb: &RgbImage,
-    render: &gb_nerf::render::ImageRender,
+    render: &ImageRender,
     truth: &[f32],
     around: (usize, usize, usize, usize),
 ) -> RgbImage {

@@ -41,6 +41,8 @@ pub struct TestViews {
     pub pairs: Vec<EvalPair>,
     /// Field evaluations per ray of each render.
     pub evaluations_per_ray: Vec<f32>,
+    /// Each view's render (colour, depth, normals), for `--probe`.
+    pub renders: Vec<gb_nerf::render::ImageRender>,
 }
 
 impl TestViews {
@@ -74,7 +76,7 @@ pub fn render_test_views(
     scene: &Scene,
     trainer: &GuidedTrainer,
 ) -> Result<TestViews, InpaintError> {
-    let (mut pairs, mut evaluations_per_ray) = (Vec::new(), Vec::new());
+    let (mut pairs, mut evaluations_per_ray, mut rendered) = (Vec::new(), Vec::new(), Vec::new());
     for view in scene.split(Split::Test) {
         let v = prepare_view(view, trainer.config.train.image_downscale);
         let r = trainer.render(&v.camera)?;
@@ -89,11 +91,13 @@ pub fn render_test_views(
                 .depth
                 .as_ref()
                 .map(|gt| (disparity_map(&r.depth, w, h), disparity_map(gt, w, h))),
-            pred: r.rgb,
+            pred: r.rgb.clone(),
         });
+        rendered.push(r);
     }
     Ok(TestViews {
         pairs,
         evaluations_per_ray,
+        renders: rendered,
     })
 }

@@ -62,6 +62,29 @@ pub struct ImageSettings<'a> {
     pub chunk: usize,
 }
 
+/// Renders the rays of `camera` through `pixels` as an image render samples them (no
+/// jitter, the settings' skipping), with `field`'s graph.
+pub(crate) fn render_pixels(
+    field: &NerfField,
+    camera: &Camera,
+    pixels: &[[f32; 2]],
+    settings: &ImageSettings,
+) -> (super::VolumeOutput, crate::sampler::SampleSet) {
+    let rays = camera_rays(camera, pixels, settings.space, settings.near, settings.far);
+    let samples = sample_and_prune::<rand_chacha::ChaCha8Rng>(
+        field,
+        &rays,
+        settings.space,
+        settings.samples_per_ray,
+        settings.occupancy,
+        None,
+    );
+    (
+        render_samples(field, &samples, settings.background),
+        samples,
+    )
+}
+
 /// Renders every pixel of `camera` with a no-grad copy of `field`.
 ///
 /// Errors when a rendered tensor does not hold `f32` values (a backend or precision surprise
@@ -80,17 +103,8 @@ pub fn render_image(
     let mut normals = Vec::with_capacity(n);
     let mut evals = 0usize;
     for chunk in pixels.chunks(settings.chunk.max(1)) {
-        let rays = camera_rays(camera, chunk, settings.space, settings.near, settings.far);
-        let samples = sample_and_prune::<rand_chacha::ChaCha8Rng>(
-            &field,
-            &rays,
-            settings.space,
-            settings.samples_per_ray,
-            settings.occupancy,
-            None,
-        );
+        let (out, samples) = render_pixels(&field, camera, chunk, settings);
         evals += samples.slots.len();
-        let out = render_samples(&field, &samples, settings.background);
         if let NormalSource::DensityGradient { step } = settings.normals {
             let nt = density_gradient_normals(
                 &field,

@@ -4,9 +4,7 @@
 use burn::module::Module;
 use gb_core::{f32_values, TensorValuesError};
 
-use super::image::ImageSettings;
-use super::rays::camera_rays;
-use super::{render_samples, sample_and_prune};
+use super::image::{render_pixels, ImageSettings};
 use crate::field::NerfField;
 use crate::scene::Camera;
 
@@ -79,16 +77,7 @@ pub fn render_profiles(
     let field = field.valid();
     let mut out = Vec::with_capacity(pixels.len());
     for chunk in pixels.chunks(settings.chunk.max(1)) {
-        let rays = camera_rays(camera, chunk, settings.space, settings.near, settings.far);
-        let samples = sample_and_prune::<rand_chacha::ChaCha8Rng>(
-            &field,
-            &rays,
-            settings.space,
-            settings.samples_per_ray,
-            settings.occupancy,
-            None,
-        );
-        let r = render_samples(&field, &samples, settings.background);
+        let (r, samples) = render_pixels(&field, camera, chunk, settings);
         let weights = f32_values(r.weights.into_data(), "ray weights")?;
         let depth = f32_values(r.depth.into_data(), "rendered depth")?;
         let opacity = f32_values(r.opacity.into_data(), "rendered opacity")?;

@@ -26,6 +26,14 @@ pub struct RayBatch {
 }
 
 impl RayBatch {
+    /// Appends the rays of `other`.
+    pub fn append(&mut self, other: RayBatch) {
+        self.origins.extend(other.origins);
+        self.dirs.extend(other.dirs);
+        self.near.extend(other.near);
+        self.far.extend(other.far);
+    }
+
     /// Number of rays.
     pub fn len(&self) -> usize {
         self.origins.len()

@@ -41,6 +41,22 @@ pub fn distortion_loss(weights: Tensor<2>, s: Tensor<2>, width: Tensor<2>) -> Te
     (inter + intra).sum_dim(1).mean()
 }
 
+/// [`distortion_loss`] of rendered `rays`: each sample's position in the ray's normalised
+/// sampling coordinate under `spacing`, and a bin width of `1 / samples`.
+pub fn distortion_of(
+    weights: Tensor<2>,
+    rays: &crate::sampler::RayBatch,
+    samples: &crate::sampler::SampleSet,
+    spacing: crate::sampler::Spacing,
+) -> Tensor<1> {
+    let device = weights.device();
+    let (r, s) = (samples.rays, samples.samples);
+    let u = crate::sampler::normalized_positions(rays, samples, spacing);
+    let u = Tensor::<2>::from_data(burn::tensor::TensorData::new(u, [r, s]), &device);
+    let width = Tensor::<2>::full([r, s], 1.0 / s as f32, &device);
+    distortion_loss(weights, u, width)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -16,13 +16,13 @@ use rand_chacha::ChaCha8Rng;
 
 use super::checkpoint::{self, CheckpointMeta, CheckpointParts, RngState};
 use super::data::TrainData;
-use super::losses::{disparity_loss, distortion_loss, mse, psnr_from_mse};
+use super::losses::{disparity_loss, distortion_of, mse, psnr_from_mse};
 use super::{DepthSupervision, NerfConfig, NerfError};
 use crate::field::NerfField;
 use crate::render::image::{render_image, ImageRender, ImageSettings};
 use crate::render::rays::camera_rays;
 use crate::render::{render_profiles, render_rays, Background, RayProfile};
-use crate::sampler::{normalized_positions, sample_rays, OccupancyGrid, RayBatch, SceneSpace};
+use crate::sampler::{sample_rays, OccupancyGrid, RayBatch, SceneSpace};
 use crate::scene::{Camera, Mask, Scene};
 
 /// Loss and quality of one training step.
@@ -253,11 +253,7 @@ impl Trainer {
         let rgb_loss = mse(out.rgb, target);
         let mut loss = rgb_loss.clone();
         if self.config.train.distortion_weight > 0.0 {
-            let s = samples.samples;
-            let u = normalized_positions(&rays, &samples, self.space.spacing());
-            let u = Tensor::<2>::from_data(TensorData::new(u, [n, s]), &device);
-            let width = Tensor::<2>::full([n, s], 1.0 / s as f32, &device);
-            let dl = distortion_loss(out.weights.clone(), u, width);
+            let dl = distortion_of(out.weights.clone(), &rays, &samples, self.space.spacing());
             loss = loss + dl.mul_scalar(self.config.train.distortion_weight);
         }
         if self.has_depth && self.config.train.depth_weight > 0.0 {
