@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Times the README's two commands from an empty target folder, xtask first:
-# `cargo xtask --help` (builds the gb-nerf binary, then prints its help), then
+# Times the README's two commands from an empty target folder, in one order:
+# `cargo xtask --help` (builds the gb-nerf binary, then prints its help) and
 # `cargo test --workspace --no-run` (the test build), and writes one JSON.
-# Usage: tools/dev/build_order.sh OUT.json [TARGET_DIR]
+# Usage: tools/dev/build_order.sh OUT.json [TARGET_DIR] [xtask-first|tests-first]
 # The crates must already be fetched (nothing is downloaded). Run it alone on the machine.
 # It builds a clean checkout of HEAD (a git worktree), so edits in progress do not leak in;
 # a failing command stops it.
@@ -11,6 +11,12 @@ shopt -s inherit_errexit
 cd "$(dirname "$0")/../.."
 out="$(realpath -m "$1")"
 target="${2:-$(mktemp -d /tmp/gb-build-order.XXXXXX)}"
+order="${3:-xtask-first}"
+case "$order" in xtask-first | tests-first) ;; *)
+    echo "build_order.sh: order '$order': expected xtask-first or tests-first" >&2
+    exit 2
+    ;;
+esac
 tree="$(mktemp -d /tmp/gb-build-order-tree.XXXXXX)"
 git worktree add --detach "$tree" HEAD >/dev/null
 trap 'git worktree remove --force "$tree"' EXIT
@@ -31,11 +37,16 @@ timed() { # label, command...
     printf '{"command": "%s", "wall_s": %.1f}' "$label" "$(echo "$t1 - $t0" | bc)"
     rm -f "$log"
 }
-first=$(timed "cargo xtask --help" cargo xtask --help)
-second=$(timed "cargo test --workspace --no-run" cargo test --workspace --no-run)
+if [ "$order" = xtask-first ]; then
+    first=$(timed "cargo xtask --help" cargo xtask --help)
+    second=$(timed "cargo test --workspace --no-run" cargo test --workspace --no-run)
+else
+    first=$(timed "cargo test --workspace --no-run" cargo test --workspace --no-run)
+    second=$(timed "cargo xtask --help" cargo xtask --help)
+fi
 cat >"$out" <<JSON
 {
-  "what": "the README's two commands from an empty target folder, xtask first, each alone on the machine",
+  "what": "the README's two commands from an empty target folder, $order, each alone on the machine",
   "date": "$(date -u +%Y-%m-%dT%H:%M:%SZ)",
   "machine": "$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)",
   "commit": "$(git rev-parse --short HEAD)",
