@@ -105,7 +105,8 @@ fn the_geometry_term_holds_the_hidden_depth_under_an_exact_reference() {
     let mut geometry = none.geometry.clone();
     geometry.depth_weight = 1.0;
     let unguided = trained(&scene, &preset, none.clone(), |_| {});
-    let targets = HiddenDepth::from_field(&unguided.nerf, geometry.clone()).unwrap();
+    let targets =
+        HiddenDepth::from_field(&unguided.nerf, geometry.clone(), none.crop_margin).unwrap();
     assert!(targets.pixels.len() > 100, "{}", targets.pixels.len());
     drop(unguided);
 

@@ -25,6 +25,13 @@ FIELDS = [
     ("surroundings", "mean_signed"),
     ("surroundings", "mean_abs"),
     ("surroundings", "within_tolerance"),
+    # newer probes only (left empty for older ones)
+    ("hidden", "rms"),
+    ("surroundings", "rms"),
+    ("disparity_scale", "rendered_max"),
+    ("disparity_scale", "true_max"),
+    ("disparity_scale", "d_psnr_own_scale"),
+    ("disparity_scale", "d_psnr_true_scale"),
 ]
 
 
@@ -37,7 +44,8 @@ def pool(run: Path) -> dict:
     views = probe["views"]
     row = {"run": str(run), "views": len(views), "tolerance": probe["tolerance"]}
     for group, key in FIELDS:
-        row[f"{group}.{key}"] = mean([v[group][key] for v in views])
+        vals = [v[group][key] for v in views if key in v.get(group, {})]
+        row[f"{group}.{key}"] = mean(vals) if vals else None
     metrics = run / "metrics.json"
     if metrics.is_file():
         m = json.loads(metrics.read_text())

@@ -65,15 +65,8 @@ impl CropGeometry {
         if mask.width != view.image.width || mask.height != view.image.height {
             return None;
         }
-        let (x0, y0, x1, y1) = mask.bbox()?;
+        let bbox = grown_bbox(mask, margin)?;
         let (w, h) = (mask.width, mask.height);
-        let grow = |lo: usize, hi: usize, size: usize| {
-            let m = ((hi - lo) as f32 * margin).round() as usize;
-            (lo.saturating_sub(m), (hi + m).min(size))
-        };
-        let (x0, x1) = grow(x0, x1, w);
-        let (y0, y1) = grow(y0, y1, h);
-        let bbox = (x0, y0, x1, y1);
         let r = resolution;
         let mut crop_mask = Vec::with_capacity(r * r);
         for [px, py] in crop_positions(bbox, r) {
@@ -124,6 +117,19 @@ impl CropGeometry {
 }
 
 /// Continuous pixel positions (pixel-centre convention) of the `r x r` crop of `bbox`.
+/// The mask's bounding box `(x0, y0, x1, y1)` (exclusive ends) grown by `margin` of its
+/// size on each side and clamped to the image; `None` for an empty mask.
+pub fn grown_bbox(mask: &Mask, margin: f32) -> Option<(usize, usize, usize, usize)> {
+    let (x0, y0, x1, y1) = mask.bbox()?;
+    let grow = |lo: usize, hi: usize, size: usize| {
+        let m = ((hi - lo) as f32 * margin).round() as usize;
+        (lo.saturating_sub(m), (hi + m).min(size))
+    };
+    let (x0, x1) = grow(x0, x1, mask.width);
+    let (y0, y1) = grow(y0, y1, mask.height);
+    Some((x0, y0, x1, y1))
+}
+
 fn crop_positions(bbox: (usize, usize, usize, usize), r: usize) -> Vec<[f32; 2]> {
     let (x0, y0, x1, y1) = bbox;
     let (bw, bh) = ((x1 - x0) as f32, (y1 - y0) as f32);

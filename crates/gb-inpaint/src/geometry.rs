@@ -8,7 +8,9 @@
 //! `[geometry] depth_weight > 0`, a run first trains the same field without any hidden-region
 //! term (exactly the `none` run of its preset and seed: same initialisation, same rays) and
 //! keeps its depth through the masked pixels of every training view (at most
-//! `max_pixels_per_view` a view, on a stride grid). Then, on every step of the run, `rays`
+//! `max_pixels_per_view` a view, on a stride grid), or with `region = "crop"` through every
+//! pixel of the guided crop (the mask's box grown by the method's `crop_margin`), so that
+//! the observed surroundings the guidance renders keep their depth as well. Then, on every step of the run, `rays`
 //! rays drawn from those pixels carry the disparity loss of the reconstruction toward that
 //! depth (weight `depth_weight`), and the distortion loss of mip-NeRF 360 (weight
 //! `distortion_weight`) keeps their weights on one surface. The unguided field is computed
@@ -43,6 +45,29 @@ pub struct GeometryConfig {
     /// At most this many masked pixels of each training view are kept (a stride grid).
     #[serde(default = "default_max_pixels")]
     pub max_pixels_per_view: usize,
+    /// Which pixels of each training view the term holds. Left out of the written config
+    /// while it is the mask, so that the runs made before it existed resume.
+    #[serde(default, skip_serializing_if = "GeometryRegion::is_mask")]
+    pub region: GeometryRegion,
+}
+
+/// The pixels of a training view whose depth the geometry term holds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GeometryRegion {
+    /// The masked pixels (the hidden region).
+    #[default]
+    Mask,
+    /// Every pixel of the guided crop: the mask's bounding box grown by the method's
+    /// `crop_margin` (the hidden region and the observed surroundings the guidance renders).
+    Crop,
+}
+
+impl GeometryRegion {
+    /// True for [`GeometryRegion::Mask`].
+    pub fn is_mask(&self) -> bool {
+        *self == Self::Mask
+    }
 }
 
 fn default_rays() -> usize {
@@ -59,6 +84,7 @@ impl Default for GeometryConfig {
             distortion_weight: 0.0,
             rays: default_rays(),
             max_pixels_per_view: default_max_pixels(),
+            region: GeometryRegion::Mask,
         }
     }
 }
@@ -107,13 +133,26 @@ pub struct HiddenPixel {
     pub depth: f32,
 }
 
-/// The masked pixels of the training views kept for the geometry term: every
-/// `stride`-th masked pixel of each view, at most `max` a view.
-pub fn hidden_pixels(views: &[TrainView], max: usize) -> Vec<(usize, Vec<[f32; 2]>)> {
+/// The pixels of the training views kept for the geometry term: every `stride`-th pixel of
+/// each masked view's region, at most `max` a view. The region is the mask, or with
+/// `crop_margin = Some(m)` the mask's bounding box grown by `m` ([`GeometryRegion::Crop`]).
+pub fn hidden_pixels(
+    views: &[TrainView],
+    max: usize,
+    crop_margin: Option<f32>,
+) -> Vec<(usize, Vec<[f32; 2]>)> {
     let mut out = Vec::new();
     for (k, v) in views.iter().enumerate() {
         let Some(mask) = &v.mask else { continue };
-        let masked: Vec<usize> = (0..mask.data.len()).filter(|&i| mask.data[i]).collect();
+        let masked: Vec<usize> = match crop_margin {
+            None => (0..mask.data.len()).filter(|&i| mask.data[i]).collect(),
+            Some(m) => match crate::crop::grown_bbox(mask, m) {
+                Some((x0, y0, x1, y1)) => (y0..y1)
+                    .flat_map(|y| (x0..x1).map(move |x| y * mask.width + x))
+                    .collect(),
+                None => Vec::new(),
+            },
+        };
         if masked.is_empty() {
             continue;
         }
@@ -139,13 +178,17 @@ pub struct HiddenDepth {
 }
 
 impl HiddenDepth {
-    /// Renders the depth of `field` (an unguided trainer) through the hidden pixels.
+    /// Renders the depth of `field` (an unguided trainer) through the pixels of
+    /// `config.region`; `crop_margin` is the method's (for [`GeometryRegion::Crop`]).
     pub fn from_field(
         unguided: &gb_nerf::train::Trainer,
         config: GeometryConfig,
+        crop_margin: f32,
     ) -> Result<Self, InpaintError> {
         let mut pixels = Vec::new();
-        for (view, px) in hidden_pixels(&unguided.data.views, config.max_pixels_per_view) {
+        let margin = (config.region == GeometryRegion::Crop).then_some(crop_margin);
+        let views = &unguided.data.views;
+        for (view, px) in hidden_pixels(views, config.max_pixels_per_view, margin) {
             let profiles = unguided.ray_profiles(&unguided.data.views[view].camera, &px)?;
             pixels.extend(profiles.iter().map(|p| HiddenPixel {
                 view,
@@ -240,11 +283,33 @@ mod tests {
             view(Some(vec![false; 8])),
             view(Some(one)),
         ];
-        let got = hidden_pixels(&views, 3);
+        let got = hidden_pixels(&views, 3, None);
         assert_eq!(got.len(), 2);
         // 8 masked pixels, at most 3: stride 3, pixels 0, 3, 6
         assert_eq!(got[0], (0, vec![[0.5, 0.5], [3.5, 0.5], [2.5, 1.5]]));
         assert_eq!(got[1], (3, vec![[2.5, 1.5]]));
+    }
+
+    #[test]
+    fn the_crop_region_adds_the_surroundings_of_the_grown_box() {
+        // one masked pixel at (2, 1) of a 4 x 2 view
+        let mut one = vec![false; 8];
+        one[6] = true;
+        let views = [view(Some(one))];
+        assert_eq!(
+            hidden_pixels(&views, 100, Some(0.0)),
+            vec![(0, vec![[2.5, 1.5]])]
+        );
+        // a 1-pixel box grown by 1 of its size on each side: x 1..4, y 0..2 (clamped)
+        let got = hidden_pixels(&views, 100, Some(1.0));
+        let want: Vec<[f32; 2]> = [(1, 0), (2, 0), (3, 0), (1, 1), (2, 1), (3, 1)]
+            .iter()
+            .map(|&(x, y)| [x as f32 + 0.5, y as f32 + 0.5])
+            .collect();
+        assert_eq!(got, vec![(0, want)]);
+        // the cap keeps a stride grid of the box: 6 pixels, at most 2: stride 3
+        let got = hidden_pixels(&views, 2, Some(1.0));
+        assert_eq!(got, vec![(0, vec![[1.5, 0.5], [1.5, 1.5]])]);
     }
 
     #[test]
@@ -263,5 +328,8 @@ mod tests {
         assert!(bad.check().unwrap().contains("geometry.distortion_weight"));
         let bad = GeometryConfig { rays: 0, ..d };
         assert!(bad.check().unwrap().contains("geometry.rays"));
+        let crop: GeometryConfig = toml::from_str("depth_weight = 1.0\nregion = \"crop\"").unwrap();
+        assert_eq!(crop.region, GeometryRegion::Crop);
+        assert!(toml::from_str::<GeometryConfig>("region = \"ring\"").is_err());
     }
 }

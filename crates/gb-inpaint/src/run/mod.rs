@@ -518,8 +518,11 @@ fn unguided_depth(
         append_log: false,
         progress,
     })?;
-    let targets =
-        crate::geometry::HiddenDepth::from_field(&unguided.nerf, method.geometry.clone())?;
+    let targets = crate::geometry::HiddenDepth::from_field(
+        &unguided.nerf,
+        method.geometry.clone(),
+        method.crop_margin,
+    )?;
     tracing::info!(
         pixels = targets.pixels.len(),
         seconds = start.elapsed().as_secs_f64(),

@@ -47,6 +47,25 @@ pub struct DepthError {
     pub mean_abs: f64,
     /// Share of pixels within [`TOLERANCE`].
     pub within_tolerance: f64,
+    /// Root mean square of `(rendered - true) / true` (what a PSNR weighs).
+    pub rms: f64,
+}
+
+/// D-PSNR of the mask box taken apart: the metric divides each disparity map by its own
+/// maximum over the whole image (SPIn-NeRF's convention, `gb_eval::disparity`), so a change
+/// of the nearest rendered point anywhere in the view rescales the box.
+#[derive(Debug, Clone, Serialize)]
+pub struct DisparityScale {
+    /// The largest rendered disparity of the view (`1 / depth`).
+    pub rendered_max: f64,
+    /// The largest true disparity of the view.
+    pub true_max: f64,
+    /// PSNR of the mask box with each map divided by its own maximum, as D-PSNR (without its
+    /// 8-bit rounding).
+    pub d_psnr_own_scale: f64,
+    /// PSNR of the mask box with both maps divided by the true maximum: the local error
+    /// alone.
+    pub d_psnr_true_scale: f64,
 }
 
 /// Where the weight of the hidden rays lies, averaged over the rays.
@@ -96,6 +115,8 @@ pub struct ViewProbe {
     pub surroundings: DepthError,
     /// Where the hidden rays' weight lies.
     pub hidden_weights: WeightMass,
+    /// The mask box's D-PSNR, split into the maps' scales and the local error.
+    pub disparity_scale: DisparityScale,
     /// A few hidden rays' weights.
     pub profiles: Vec<ProfileRecord>,
 }
@@ -165,6 +186,7 @@ pub fn write_probe(
             hidden: depth_error(&hidden, &render.depth, truth),
             surroundings: depth_error(&ring, &render.depth, truth),
             hidden_weights: weight_mass(&profiles, &truths),
+            disparity_scale: disparity_scale(&render.depth, truth, box_pixels(bbox, w)),
             profiles: records,
         });
     }
@@ -191,6 +213,42 @@ pub fn depth_error(pixels: &[usize], rendered: &[f32], truth: &[f32]) -> DepthEr
         mean_signed: rel.iter().sum::<f64>() / n,
         mean_abs: rel.iter().map(|e| e.abs()).sum::<f64>() / n,
         within_tolerance: rel.iter().filter(|e| e.abs() <= TOLERANCE as f64).count() as f64 / n,
+        rms: (rel.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
+    }
+}
+
+/// [`DisparityScale`] of the rendered and true depth maps over the pixels `region`.
+pub fn disparity_scale(
+    rendered: &[f32],
+    truth: &[f32],
+    region: impl Iterator<Item = usize>,
+) -> DisparityScale {
+    let disparity = |d: f32| {
+        if d.is_finite() && d > 0.0 {
+            1.0 / f64::from(d)
+        } else {
+            0.0
+        }
+    };
+    let max = |m: &[f32]| m.iter().map(|&d| disparity(d)).fold(0.0, f64::max);
+    let (rmax, tmax) = (max(rendered).max(1e-12), max(truth).max(1e-12));
+    let region: Vec<usize> = region.collect();
+    let psnr = |scale: f64| {
+        let sum: f64 = region
+            .iter()
+            .map(|&i| {
+                let p = (disparity(rendered[i]) / scale).clamp(0.0, 1.0);
+                let t = (disparity(truth[i]) / tmax).clamp(0.0, 1.0);
+                (p - t) * (p - t)
+            })
+            .sum();
+        -10.0 * (sum / region.len().max(1) as f64).max(1e-12).log10()
+    };
+    DisparityScale {
+        rendered_max: rmax,
+        true_max: tmax,
+        d_psnr_own_scale: psnr(rmax),
+        d_psnr_true_scale: psnr(tmax),
     }
 }
 
@@ -350,6 +408,25 @@ mod tests {
         assert!((e.mean_signed - (-0.5 + 0.025) / 3.0).abs() < 1e-6, "{e:?}");
         assert!((e.mean_abs - (0.5 + 0.025) / 3.0).abs() < 1e-6, "{e:?}");
         assert!((e.within_tolerance - 2.0 / 3.0).abs() < 1e-9);
+        let rms = ((0.25 + 0.025 * 0.025) / 3.0_f64).sqrt();
+        assert!((e.rms - rms).abs() < 1e-6, "{e:?}");
+    }
+
+    #[test]
+    fn a_near_point_outside_the_box_rescales_its_d_psnr() {
+        // truth: disparity 1 everywhere but 0.5 in the box (pixels 2, 3)
+        let truth = [1.0, 1.0, 2.0, 2.0];
+        // the box rendered exactly, and a point outside it twice as near
+        let rendered = [0.5, 1.0, 2.0, 2.0];
+        let s = disparity_scale(&rendered, &truth, [2, 3].into_iter());
+        assert!((s.rendered_max - 2.0).abs() < 1e-9 && (s.true_max - 1.0).abs() < 1e-9);
+        // against its own maximum the box reads 0.25 instead of 0.5: PSNR 20 log10(4)
+        assert!(
+            (s.d_psnr_own_scale - 20.0 * 4.0_f64.log10()).abs() < 1e-6,
+            "{s:?}"
+        );
+        // on the true scale the box is exact
+        assert!(s.d_psnr_true_scale > 100.0, "{s:?}");
     }
 
     #[test]
