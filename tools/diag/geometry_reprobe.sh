@@ -16,7 +16,7 @@ if [ ${#rows[@]} -eq 0 ]; then
         [ -f "$run/checkpoint.bin" ] && rows+=("$(basename "$run")")
     done
 fi
-has_scales() { [ -f "$1/probe/probe.json" ] && grep -q d_psnr_true_scale "$1/probe/probe.json"; }
+has_scales() { [ -f "$1/probe/probe.json" ] && grep -q rendered_max_in_box "$1/probe/probe.json"; }
 args=()
 for row in "${rows[@]}"; do
     if has_scales "$grid/$row"; then

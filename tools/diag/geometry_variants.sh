@@ -7,6 +7,8 @@
 #   e.g. tools/diag/geometry_variants.sh stairs depth1 "depth_weight = 1.0" reference-oracle
 set -euo pipefail
 cd "$(dirname "$0")/../.."
+# the build the README commands and CI share (.ci/run)
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/gb-nerf-rs/target}"
 scene="$1" variant="$2" table="$3"
 shift 3
 rows=("$@")

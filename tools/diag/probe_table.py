@@ -29,6 +29,7 @@ FIELDS = [
     ("hidden", "rms"),
     ("surroundings", "rms"),
     ("disparity_scale", "rendered_max"),
+    ("disparity_scale", "rendered_max_in_box"),
     ("disparity_scale", "true_max"),
     ("disparity_scale", "d_psnr_own_scale"),
     ("disparity_scale", "d_psnr_true_scale"),
@@ -53,6 +54,8 @@ def pool(run: Path) -> dict:
         row["d_psnr_bbox"] = e.get("d_psnr_bbox")
         row["lpips_bbox"] = e.get("lpips_bbox")
         row["ssim_bbox"] = m.get("mean", {}).get("ssim_bbox")
+        row["psnr"] = e.get("psnr")
+        row["train_seconds"] = m.get("train_seconds_this_run")
     return row
 
 

@@ -5,6 +5,8 @@
 # Usage: tools/diag/reprobe.sh RUN_DIR DEST
 set -euo pipefail
 cd "$(dirname "$0")/../.."
+# the build the README commands and CI share (.ci/run)
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/gb-nerf-rs/target}"
 run="${1%/}" dest="${2%/}"
 [ -f "$run/checkpoint.bin" ] || { echo "reprobe.sh: $run/checkpoint.bin: no checkpoint" >&2; exit 1; }
 mkdir -p "$dest"

@@ -525,8 +525,9 @@ fn unguided_depth(
     )?;
     tracing::info!(
         pixels = targets.pixels.len(),
+        region = ?method.geometry.region,
         seconds = start.elapsed().as_secs_f64(),
-        "geometry: the unguided field's depth through the masked pixels"
+        "geometry: the unguided field's depth through the held pixels"
     );
     Ok(targets)
 }

@@ -58,6 +58,10 @@ pub struct DepthError {
 pub struct DisparityScale {
     /// The largest rendered disparity of the view (`1 / depth`).
     pub rendered_max: f64,
+    /// The pixel `[x, y]` that holds it (the nearest rendered point).
+    pub rendered_max_at: [usize; 2],
+    /// Whether that pixel lies in the mask box.
+    pub rendered_max_in_box: bool,
     /// The largest true disparity of the view.
     pub true_max: f64,
     /// PSNR of the mask box with each map divided by its own maximum, as D-PSNR (without its
@@ -186,7 +190,7 @@ pub fn write_probe(
             hidden: depth_error(&hidden, &render.depth, truth),
             surroundings: depth_error(&ring, &render.depth, truth),
             hidden_weights: weight_mass(&profiles, &truths),
-            disparity_scale: disparity_scale(&render.depth, truth, box_pixels(bbox, w)),
+            disparity_scale: disparity_scale(&render.depth, truth, w, box_pixels(bbox, w)),
             profiles: records,
         });
     }
@@ -217,10 +221,12 @@ pub fn depth_error(pixels: &[usize], rendered: &[f32], truth: &[f32]) -> DepthEr
     }
 }
 
-/// [`DisparityScale`] of the rendered and true depth maps over the pixels `region`.
+/// [`DisparityScale`] of the rendered and true depth maps (row-major, `width` wide) over the
+/// pixels `region`.
 pub fn disparity_scale(
     rendered: &[f32],
     truth: &[f32],
+    width: usize,
     region: impl Iterator<Item = usize>,
 ) -> DisparityScale {
     let disparity = |d: f32| {
@@ -233,6 +239,9 @@ pub fn disparity_scale(
     let max = |m: &[f32]| m.iter().map(|&d| disparity(d)).fold(0.0, f64::max);
     let (rmax, tmax) = (max(rendered).max(1e-12), max(truth).max(1e-12));
     let region: Vec<usize> = region.collect();
+    let at = (0..rendered.len())
+        .max_by(|&a, &b| disparity(rendered[a]).total_cmp(&disparity(rendered[b])))
+        .unwrap_or(0);
     let psnr = |scale: f64| {
         let sum: f64 = region
             .iter()
@@ -246,6 +255,8 @@ pub fn disparity_scale(
     };
     DisparityScale {
         rendered_max: rmax,
+        rendered_max_at: [at % width.max(1), at / width.max(1)],
+        rendered_max_in_box: region.contains(&at),
         true_max: tmax,
         d_psnr_own_scale: psnr(rmax),
         d_psnr_true_scale: psnr(tmax),
@@ -418,8 +429,10 @@ mod tests {
         let truth = [1.0, 1.0, 2.0, 2.0];
         // the box rendered exactly, and a point outside it twice as near
         let rendered = [0.5, 1.0, 2.0, 2.0];
-        let s = disparity_scale(&rendered, &truth, [2, 3].into_iter());
+        let s = disparity_scale(&rendered, &truth, 2, [2, 3].into_iter());
         assert!((s.rendered_max - 2.0).abs() < 1e-9 && (s.true_max - 1.0).abs() < 1e-9);
+        assert_eq!(s.rendered_max_at, [0, 0]);
+        assert!(!s.rendered_max_in_box);
         // against its own maximum the box reads 0.25 instead of 0.5: PSNR 20 log10(4)
         assert!(
             (s.d_psnr_own_scale - 20.0 * 4.0_f64.log10()).abs() < 1e-6,
