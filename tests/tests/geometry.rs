@@ -10,7 +10,7 @@ use gb_core::BackendKind;
 use gb_inpaint::geometry::HiddenDepth;
 use gb_inpaint::reference::load_references;
 use gb_inpaint::{GuidedTrainer, MethodConfig};
-use gb_nerf::scene::{load, LoadOptions, Scene, Split};
+use gb_nerf::scene::{load, LoadOptions, Scene};
 use gb_nerf::train::NerfConfig;
 use gb_tests::{assert_success, path_str as s, small_preset, xtask};
 
@@ -91,11 +91,7 @@ fn the_geometry_term_holds_the_hidden_depth_under_an_exact_reference() {
     let dir = tempfile::tempdir().unwrap();
     let (d, scene) = stairs(dir.path());
     let preset = small_preset(dir.path(), None);
-    let view = scene
-        .split(Split::Train)
-        .find(|v| v.mask.as_ref().is_some_and(|m| m.data.iter().any(|b| *b)))
-        .map(|v| v.name.clone())
-        .expect("a masked training view");
+    let view = crate::reference::masked_view(&scene);
     let pair = format!(
         "{view}.png={}",
         s(&d.join("clean").join(format!("{view}.png")))

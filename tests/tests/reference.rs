@@ -20,7 +20,8 @@ fn scene(dir: &Path) -> (PathBuf, Scene) {
 }
 
 /// The first training view with a non-empty mask.
-fn masked_view(scene: &Scene) -> String {
+/// The name of the first training view with a non-empty mask.
+pub(crate) fn masked_view(scene: &Scene) -> String {
     scene
         .split(Split::Train)
         .find(|v| v.mask.as_ref().is_some_and(|m| m.data.iter().any(|b| *b)))

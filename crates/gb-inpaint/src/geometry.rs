@@ -102,15 +102,12 @@ impl GeometryConfig {
 
     /// A message naming the first invalid field, if any.
     pub fn check(&self) -> Option<String> {
-        for (name, v) in [
+        let weights = [
             ("depth_weight", self.depth_weight),
             ("distortion_weight", self.distortion_weight),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Some(format!(
-                    "geometry.{name} = {v} must be a finite number >= 0"
-                ));
-            }
+        ];
+        if let Some(msg) = crate::method::first_negative_weight("geometry", &weights) {
+            return Some(msg);
         }
         if self.rays == 0 {
             return Some("geometry.rays must be >= 1".into());

@@ -558,6 +558,15 @@ impl MethodConfig {
     }
 }
 
+/// The message of the first of `fields` (of the table `section`) that is not a finite
+/// number >= 0, if any: the check every weight of a method's tables shares.
+pub(crate) fn first_negative_weight(section: &str, fields: &[(&str, f64)]) -> Option<String> {
+    fields
+        .iter()
+        .find(|(_, v)| !(v.is_finite() && *v >= 0.0))
+        .map(|(name, v)| format!("{section}.{name} = {v} must be a finite number >= 0"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -162,15 +162,12 @@ impl ReferenceConfig {
 
     /// A message naming the first invalid field, if any.
     pub fn check(&self) -> Option<String> {
-        for (name, v) in [
+        let weights = [
             ("weight", self.weight),
             ("anchor_weight", self.anchor_weight),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Some(format!(
-                    "reference.{name} = {v} must be a finite number >= 0"
-                ));
-            }
+        ];
+        if let Some(msg) = crate::method::first_negative_weight("reference", &weights) {
+            return Some(msg);
         }
         if self.rays == 0 {
             return Some("reference.rays must be >= 1".into());

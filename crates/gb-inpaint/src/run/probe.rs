@@ -236,12 +236,16 @@ pub fn disparity_scale(
             0.0
         }
     };
-    let max = |m: &[f32]| m.iter().map(|&d| disparity(d)).fold(0.0, f64::max);
-    let (rmax, tmax) = (max(rendered).max(1e-12), max(truth).max(1e-12));
-    let region: Vec<usize> = region.collect();
     let at = (0..rendered.len())
         .max_by(|&a, &b| disparity(rendered[a]).total_cmp(&disparity(rendered[b])))
         .unwrap_or(0);
+    let rmax = rendered.get(at).map_or(0.0, |&d| disparity(d)).max(1e-12);
+    let tmax = truth
+        .iter()
+        .map(|&d| disparity(d))
+        .fold(0.0, f64::max)
+        .max(1e-12);
+    let region: Vec<usize> = region.collect();
     let psnr = |scale: f64| {
         let sum: f64 = region
             .iter()
