@@ -98,8 +98,9 @@ fn the_geometry_term_holds_the_hidden_depth_under_an_exact_reference() {
     );
     let none = MethodConfig::builtin("none").unwrap();
 
-    let mut geometry = none.geometry.clone();
-    geometry.depth_weight = 1.0;
+    // the built-in `none`'s table: depth_weight 1 through the guided crop
+    let geometry = none.geometry.clone();
+    assert!(geometry.enabled());
     let unguided = trained(&scene, &preset, none.clone(), |_| {});
     let targets =
         HiddenDepth::from_field(&unguided.nerf, geometry.clone(), none.crop_margin).unwrap();

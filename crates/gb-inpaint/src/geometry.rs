@@ -28,7 +28,10 @@ use serde::{Deserialize, Serialize};
 use crate::crop::{disparity_pair, disparity_toward, RenderContext};
 use crate::error::InpaintError;
 
-/// `[geometry]` of a method (module docs). Off by default.
+/// `[geometry]` of a method (module docs). Off when a method file leaves it out; the built-in
+/// `none` and the default method `gb-nerf-unseen` set `depth_weight = 1`, `region = "crop"`,
+/// and a run applies it only when it has a term inside the mask
+/// ([`crate::MethodConfig::holds_geometry`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GeometryConfig {

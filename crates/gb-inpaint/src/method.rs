@@ -310,7 +310,8 @@ pub struct MethodConfig {
     )]
     pub reference: crate::reference::ReferenceConfig,
     /// The hidden region's geometry held to the unguided field's ([`crate::geometry`]; off
-    /// by default). Left out of the written config while it is the default.
+    /// when left out, on in the built-in `none` and `gb-nerf-unseen`). Left out of the written
+    /// config while it is off.
     #[serde(
         default,
         skip_serializing_if = "crate::geometry::GeometryConfig::is_default"
@@ -493,6 +494,14 @@ impl MethodConfig {
         self.rgb.is_some() || self.normal.is_some()
     }
 
+    /// True when `[geometry]` has a weight and the run has a term inside the mask for it to
+    /// hold against: guidance on a modality, or `has_references` (reference views). The
+    /// built-in `none` carries the table so that a reference added to it is held, while a
+    /// plain `none` run pays nothing.
+    pub fn holds_geometry(&self, has_references: bool) -> bool {
+        self.geometry.enabled() && (self.needs_prior() || has_references)
+    }
+
     /// `step` (counted out of `reference_steps`) in a run of `total_steps` steps:
     /// `step * total_steps / reference_steps` (rounded down).
     fn scaled_to_run(&self, step: usize, total_steps: usize) -> usize {
@@ -571,6 +580,24 @@ pub(crate) fn first_negative_weight(section: &str, fields: &[(&str, f64)]) -> Op
 mod tests {
     use super::*;
     use gb_diffusion::distill::GuidanceMethod;
+
+    #[test]
+    fn the_default_method_and_a_reference_on_none_hold_the_crop_geometry() {
+        use crate::geometry::GeometryRegion;
+        let none = MethodConfig::builtin("none").unwrap();
+        assert_eq!(none.geometry.depth_weight, 1.0);
+        assert_eq!(none.geometry.region, GeometryRegion::Crop);
+        // a plain `none` run has nothing inside the mask to hold against: no unguided pass
+        assert!(!none.holds_geometry(false));
+        assert!(none.holds_geometry(true));
+        let default = MethodConfig::builtin(crate::run::DEFAULT_METHOD).unwrap();
+        assert!(default.holds_geometry(false));
+        assert_eq!(default.geometry, none.geometry);
+        // the paper's method stays as published
+        assert!(!MethodConfig::builtin("gb-nerf")
+            .unwrap()
+            .holds_geometry(true));
+    }
 
     #[test]
     fn every_builtin_parses_and_matches_its_name() {

@@ -323,7 +323,10 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
             ckpt.display()
         );
     }
-    let hidden_depth = if method.geometry.enabled() {
+    if method.geometry.enabled() && !method.holds_geometry(!references.is_empty()) {
+        tracing::info!("geometry: no term inside the mask to hold against, so no unguided pass");
+    }
+    let hidden_depth = if method.holds_geometry(!references.is_empty()) {
         Some(unguided_depth(
             &scene,
             &config,
