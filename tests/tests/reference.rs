@@ -2,11 +2,13 @@
 //! prior's own fill (`cargo xtask fill`) on a tiny procedural stairs scene (40x30, 5 views)
 //! whose `clean/` holds the exact object-free training views: the errors, each naming the
 //! flag and the file; a reference that pulls its view's masked pixels to the clean image and
-//! is carried to other views; an exact resume; and the fill's paste-back.
+//! is carried to other views; an exact resume; and the fills' paste-back (the prior's, and
+//! the two without weights).
 
 use std::path::{Path, PathBuf};
 
 use gb_core::{BackendKind, RgbImage};
+use gb_inpaint::fill::{FillOptions, FillWith};
 use gb_inpaint::reference::{load_references, ReferenceView};
 use gb_inpaint::{GuidedTrainer, MethodConfig};
 use gb_nerf::scene::{load, LoadOptions, Scene, Split};
@@ -266,11 +268,8 @@ fn fill_pastes_the_prior_s_sample_into_the_mask_only() {
         changed * 2 > masked,
         "{changed} of {masked} masked pixels changed"
     );
-    assert!(
-        filled.prompts.0.starts_with("RGB image, "),
-        "{:?}",
-        filled.prompts
-    );
+    let prompts = &filled.prior.as_ref().unwrap().prompts;
+    assert!(prompts.0.starts_with("RGB image, "), "{prompts:?}");
 
     let e = gb_inpaint::fill::fill_view(&scene, &d, "view_999", &opts).unwrap_err();
     assert!(e.to_string().starts_with("--view view_999"), "{e}");
@@ -356,4 +355,79 @@ fn a_run_with_a_reference_records_it_and_export_none_writes_no_export() {
         Path::new(image).is_absolute() && Path::new(image).is_file(),
         "{pair}"
     );
+}
+
+/// Masked PSNR (dB) of `a` against `b`.
+fn masked_psnr(a: &RgbImage, b: &RgbImage, mask: &[bool]) -> f64 {
+    let (mut se, mut n) = (0.0f64, 0usize);
+    for (i, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
+        for c in 0..3 {
+            let d = (a.data[3 * i + c] - b.data[3 * i + c]) as f64;
+            se += d * d;
+            n += 1;
+        }
+    }
+    10.0 * (n as f64 / se).log10()
+}
+
+/// `fill --with fsr` and `--with smooth` need no prior: they keep every pixel outside the mask
+/// and bring the masked ones nearer the scene's clean view than the object was; an empty
+/// mask is an error naming `--view`; the command writes the PNG.
+#[test]
+fn the_fills_without_weights_remove_the_object() {
+    let dir = tempfile::tempdir().unwrap();
+    let (d, mut scene) = scene(dir.path());
+    let view = masked_view(&scene);
+    let v = scene.views.iter().find(|v| v.name == view).unwrap().clone();
+    let mask = v.mask.as_ref().unwrap();
+    let clean = gb_core::read_rgb(&d.join("clean").join(format!("{view}.png")), None).unwrap();
+    let object = masked_psnr(&v.image, &clean, &mask.data);
+    for with in [FillWith::Fsr, FillWith::Smooth] {
+        let opts = FillOptions {
+            with,
+            ..Default::default()
+        };
+        let filled = gb_inpaint::fill::fill_view(&scene, &d, &view, &opts).unwrap();
+        assert!(filled.prior.is_none());
+        for (i, m) in mask.data.iter().enumerate() {
+            if !m {
+                assert_eq!(
+                    filled.image.data[3 * i..3 * i + 3],
+                    v.image.data[3 * i..3 * i + 3]
+                );
+            }
+        }
+        let p = masked_psnr(&filled.image, &clean, &mask.data);
+        assert!(
+            p > object + 3.0,
+            "{}: masked PSNR {p:.2} dB, the object's {object:.2} dB",
+            with.name()
+        );
+    }
+    let i = scene.views.iter().position(|v| v.name == view).unwrap();
+    scene.views[i].mask.as_mut().unwrap().data.fill(false);
+    let opts = FillOptions {
+        with: FillWith::Fsr,
+        ..Default::default()
+    };
+    let e = gb_inpaint::fill::fill_view(&scene, &d, &view, &opts).unwrap_err();
+    assert!(e.to_string().starts_with(&format!("--view {view}")), "{e}");
+    assert!(e.to_string().contains("the mask is empty"), "{e}");
+
+    let png = dir.path().join("fsr.png");
+    let out = xtask(&[
+        "fill",
+        "--scene",
+        s(&d),
+        "--view",
+        &view,
+        "--with",
+        "fsr",
+        "--out",
+        s(&png),
+    ]);
+    assert_success(&out, "fill --with fsr");
+    assert!(String::from_utf8_lossy(&out.stdout).contains("filled by fsr"));
+    let back = gb_core::read_rgb(&png, None).unwrap();
+    assert_eq!((back.width, back.height), (40, 30));
 }

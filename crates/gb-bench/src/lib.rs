@@ -13,6 +13,7 @@
 
 pub mod distill;
 pub mod eval;
+pub mod fill;
 pub mod gpu;
 mod grid_args;
 pub mod nerf;
@@ -50,6 +51,8 @@ enum What {
     Pipeline(pipeline::Args),
     /// The speed/accuracy trade: mask-box metrics against wall time per preset and method.
     Trade(trade::Args),
+    /// The 2D fills of `cargo xtask fill` against the exact view, and their speed.
+    Fill(fill::Args),
     /// Every GPU figure in one file (U-Net, VAE, a full step, NeRF vs flex); `--smoke` at
     /// tiny sizes on any device.
     Gpu(gpu::Args),
@@ -65,6 +68,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         What::Quality(a) => quality::run(a),
         What::Pipeline(a) => pipeline::run(a),
         What::Trade(a) => trade::run(a),
+        What::Fill(a) => fill::run(a),
         What::Gpu(a) => gpu::run(a),
     }
 }

@@ -1,13 +1,17 @@
-//! `cargo xtask fill`: a reference view ([`crate::reference`]) from the prior itself, for a
-//! user without a 2D inpainting tool. Multi-step sampling (DDIM with classifier-free
-//! guidance, the known region blended in after each step), not distillation.
+//! `cargo xtask fill`: a reference view ([`crate::reference`]) filled in 2D, for a user
+//! without a 2D inpainting tool. `--with` picks the fill:
 //!
-//! The view's guidance crop (its mask's bounding box grown by `margin`, as the guided run
-//! crops it: [`CropGeometry`]) is resampled to the prior's resolution, inpainted with the
-//! prompts the guided methods use (the scene's captions in `"RGB image, {caption}"`,
-//! negative `"RGB image, {object_caption}"`) and the prior's geometric LoRA when it has one,
-//! and pasted back into the masked pixels only (bilinear): every pixel outside the mask is
-//! the input's.
+//! - `fsr`: frequency-selective reconstruction ([`gb_fill::fsr`]), no weights;
+//! - `smooth`: the membrane fill ([`gb_fill::smooth`]), no weights, no texture;
+//! - `prior`: the diffusion prior itself, by multi-step sampling (DDIM with classifier-free
+//!   guidance, the known region blended in after each step), not distillation. The view's
+//!   guidance crop (its mask's bounding box grown by `margin`, as the guided run crops it:
+//!   [`CropGeometry`]) is resampled to the prior's resolution, inpainted with the prompts the
+//!   guided methods use (the scene's captions in `"RGB image, {caption}"`, negative
+//!   `"RGB image, {object_caption}"`) and the prior's geometric LoRA when it has one, and
+//!   pasted back into the masked pixels (bilinear).
+//!
+//! Every pixel outside the mask is the input's.
 
 use std::path::{Path, PathBuf};
 
@@ -22,9 +26,37 @@ use crate::error::InpaintError;
 use crate::method::{PromptOverrides, SceneCaptions};
 use crate::prior::LORA_FILE_NAME;
 
+/// Which 2D fill [`fill_view`] runs (module docs).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FillWith {
+    /// Frequency-selective reconstruction ([`gb_fill::fsr`]).
+    Fsr,
+    /// The membrane fill ([`gb_fill::smooth`]).
+    Smooth,
+    /// The diffusion prior (DDIM sampling).
+    #[default]
+    Prior,
+}
+
+impl FillWith {
+    /// The name `--with` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Fsr => "fsr",
+            Self::Smooth => "smooth",
+            Self::Prior => "prior",
+        }
+    }
+}
+
 /// What `fill` needs besides the scene and the view.
 #[derive(Debug, Clone)]
 pub struct FillOptions {
+    /// Which fill.
+    pub with: FillWith,
+    /// The settings of [`FillWith::Fsr`].
+    pub fsr: gb_fill::FsrSettings,
     /// `tiny`, a diffusers inpainting folder or a hub id.
     pub prior: String,
     /// LoRA files merged in order; `None`: the prior's own geometric LoRA when it has one.
@@ -46,6 +78,8 @@ pub struct FillOptions {
 impl Default for FillOptions {
     fn default() -> Self {
         Self {
+            with: FillWith::default(),
+            fsr: gb_fill::FsrSettings::default(),
             prior: "tiny".into(),
             lora: None,
             prompts: PromptOverrides::default(),
@@ -65,14 +99,23 @@ pub struct Fill {
     pub image: RgbImage,
     /// The view's file stem.
     pub view: String,
+    /// Which fill made it.
+    pub with: FillWith,
+    /// What the prior's fill used (`None` for the fills without weights).
+    pub prior: Option<PriorFill>,
+    /// Masked pixels filled.
+    pub filled_pixels: usize,
+}
+
+/// The prior, LoRA files and prompts of a [`FillWith::Prior`] fill.
+#[derive(Debug, Clone)]
+pub struct PriorFill {
     /// The prior folder.
     pub prior: PathBuf,
     /// The LoRA files merged.
     pub lora: Vec<PathBuf>,
     /// The prompt and negative prompt.
     pub prompts: (String, String),
-    /// Masked pixels filled.
-    pub filled_pixels: usize,
 }
 
 fn view_error(view: &str, scene: &Path, reason: String) -> InpaintError {
@@ -83,8 +126,8 @@ fn view_error(view: &str, scene: &Path, reason: String) -> InpaintError {
 }
 
 /// Fills the masked pixels of training view `view` (a file name or stem) of `scene`
-/// (loaded from `scene_dir`) with the prior (module docs). Errors name the flag: an unknown
-/// view, a view without a mask, a prior or LoRA that does not load.
+/// (loaded from `scene_dir`) with `opts.with` (module docs). Errors name the flag: an unknown
+/// view, a view without a mask or with an empty one, a prior or LoRA that does not load.
 pub fn fill_view(
     scene: &Scene,
     scene_dir: &Path,
@@ -105,6 +148,9 @@ pub fn fill_view(
                 format!("'{view}' is not a training view of scene '{}'", scene.name),
             )
         })?;
+    if opts.with != FillWith::Prior {
+        return classical_fill(v, scene_dir, view, opts);
+    }
     let full = prepare_view(v, 1);
     if opts.steps == 0 {
         return Err(InpaintError::Spec {
@@ -200,10 +246,42 @@ pub fn fill_view(
     Ok(Fill {
         image,
         view: v.name.clone(),
-        prior: prior_dir,
-        lora,
-        prompts: (prompts.appearance, prompts.negative),
+        with: FillWith::Prior,
+        prior: Some(PriorFill {
+            prior: prior_dir,
+            lora,
+            prompts: (prompts.appearance, prompts.negative),
+        }),
         filled_pixels: filled,
+    })
+}
+
+/// [`FillWith::Fsr`] or [`FillWith::Smooth`] of view `v` at its full resolution.
+fn classical_fill(
+    v: &gb_nerf::scene::View,
+    scene_dir: &Path,
+    view: &str,
+    opts: &FillOptions,
+) -> Result<Fill, InpaintError> {
+    let mask = v.mask.as_ref().ok_or_else(|| {
+        view_error(
+            view,
+            scene_dir,
+            format!("view '{}' has no mask, so there is nothing to fill", v.name),
+        )
+    })?;
+    let size = (mask.width, mask.height);
+    let image = match opts.with {
+        FillWith::Fsr => gb_fill::fsr::fill(&v.image, &mask.data, size, &opts.fsr),
+        _ => gb_fill::smooth::fill(&v.image, &mask.data, size),
+    }
+    .map_err(|e| view_error(view, scene_dir, format!("view '{}': {e}", v.name)))?;
+    Ok(Fill {
+        image,
+        view: v.name.clone(),
+        with: opts.with,
+        prior: None,
+        filled_pixels: mask.data.iter().filter(|m| **m).count(),
     })
 }
 

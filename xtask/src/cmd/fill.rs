@@ -1,8 +1,9 @@
-//! `cargo xtask fill`: a reference view from the prior (`gb_inpaint::fill`), for
+//! `cargo xtask fill`: a reference view filled in 2D (`gb_inpaint::fill`), for
 //! `inpaint --reference VIEW=IMAGE`.
 //!
 //! ```text
-//! cargo xtask fill --scene DIR --view VIEW --out IMAGE [--prior tiny|DIR|HUB_ID]
+//! cargo xtask fill --scene DIR --view VIEW --out IMAGE [--with fsr|smooth|prior]
+//!     [--prior tiny|DIR|HUB_ID]
 //!     [--lora FILE ...] [--prompt P] [--negative-prompt N] [--steps 50] [--guidance 7.5]
 //!     [--seed 0] [--device D]
 //! ```
@@ -11,7 +12,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use gb_core::BackendKind;
-use gb_inpaint::fill::{fill, FillOptions};
+use gb_inpaint::fill::{fill, FillOptions, FillWith};
 use gb_inpaint::PromptOverrides;
 
 /// Arguments of `cargo xtask fill`.
@@ -26,6 +27,10 @@ pub struct Args {
     /// Output PNG: the view at its full size, the masked pixels filled.
     #[arg(long)]
     out: PathBuf,
+    /// The fill: `fsr` (frequency-selective reconstruction, no weights), `smooth` (the
+    /// membrane fill, no weights) or `prior` (the diffusion prior; the flags below).
+    #[arg(long, value_enum, default_value_t = With::Prior)]
+    with: With,
     /// `tiny` (the built-in prior), a diffusers inpainting folder or a hub id.
     #[arg(long, default_value = "tiny")]
     prior: String,
@@ -53,9 +58,22 @@ pub struct Args {
     device: Option<BackendKind>,
 }
 
+/// `--with`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum With {
+    Fsr,
+    Smooth,
+    Prior,
+}
+
 /// Fills the view and writes the PNG.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let opts = FillOptions {
+        with: match args.with {
+            With::Fsr => FillWith::Fsr,
+            With::Smooth => FillWith::Smooth,
+            With::Prior => FillWith::Prior,
+        },
         prior: args.prior,
         lora: (!args.lora.is_empty()).then_some(args.lora),
         prompts: PromptOverrides {
@@ -73,10 +91,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     gb_core::write_rgb_png(&args.out, &filled.image)
         .with_context(|| format!("--out {}", args.out.display()))?;
     println!(
-        "wrote {} ({} masked pixels of {} filled); use it with: inpaint --scene {} --reference {}.png={}",
+        "wrote {} ({} masked pixels of {} filled by {}); use it with: inpaint --scene {} --reference {}.png={}",
         args.out.display(),
         filled.filled_pixels,
         filled.view,
+        filled.with.name(),
         args.scene.display(),
         filled.view,
         args.out.display()
