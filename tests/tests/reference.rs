@@ -359,15 +359,7 @@ fn a_run_with_a_reference_records_it_and_export_none_writes_no_export() {
 
 /// Masked PSNR (dB) of `a` against `b`.
 fn masked_psnr(a: &RgbImage, b: &RgbImage, mask: &[bool]) -> f64 {
-    let (mut se, mut n) = (0.0f64, 0usize);
-    for (i, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
-        for c in 0..3 {
-            let d = (a.data[3 * i + c] - b.data[3 * i + c]) as f64;
-            se += d * d;
-            n += 1;
-        }
-    }
-    10.0 * (n as f64 / se).log10()
+    gb_eval::psnr(a, b, &gb_eval::Region::Mask(mask.to_vec())).unwrap()
 }
 
 /// `fill --with fsr` and `--with smooth` need no prior: they keep every pixel outside the mask
