@@ -20,7 +20,10 @@ mkdir -p "$methods"
 for row in "${rows[@]}"; do
     name="$scene-$row-$variant"
     file="$methods/$name.toml"
-    sed -e "s/^name = \"$row\"/name = \"$row-$variant\"/" "$grid/$row.toml" > "$file"
+    # the method's own [geometry] table (the built-in none and gb-nerf-unseen carry one) gives
+    # way to the variant's: drop it, up to the next table
+    sed -e "s/^name = \"$row\"/name = \"$row-$variant\"/" "$grid/$row.toml" |
+        awk '/^\[geometry\]$/ { skip = 1; next } /^\[/ { skip = 0 } !skip' > "$file"
     printf '\n[geometry]\n%b\n' "$table" >> "$file"
     cargo xtask inpaint --scene "$scene_dir" --method "$file" --seed 100 --preset fast \
         --weights "${GB_TEST_DATA:-../shared}/weights" --export none --orbit-frames 0 --probe \
