@@ -357,6 +357,56 @@ fn a_run_with_a_reference_records_it_and_export_none_writes_no_export() {
     );
 }
 
+/// `--reference auto`: the run fills the middle masked training view by `fsr` into OUT, uses
+/// it as its reference and records the fill in its config.
+#[test]
+fn reference_auto_fills_the_middle_masked_view() {
+    // trains in-process from the seeded device RNG (crate::DEVICE_RNG)
+    let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let (d, scene) = scene(dir.path());
+    let masked: Vec<String> = scene
+        .split(Split::Train)
+        .filter(|v| v.mask.as_ref().is_some_and(|m| m.data.iter().any(|b| *b)))
+        .map(|v| v.name.clone())
+        .collect();
+    let view = &masked[masked.len() / 2];
+    let out = dir.path().join("out");
+    let spec = gb_inpaint::RunSpec {
+        scene: Some(d.clone()),
+        method: Some("none".into()),
+        preset: s(&small_preset(dir.path(), None)).into(),
+        device: BackendKind::Flex,
+        steps: Some(2),
+        references: vec!["auto".into()],
+        export: gb_inpaint::export::ExportMode::None,
+        orbit_frames: 0,
+        out: out.clone(),
+        ..gb_inpaint::RunSpec::default()
+    };
+    gb_inpaint::run::run(&spec).unwrap();
+    let png = out.join(format!("reference-auto-{view}.png"));
+    let filled = gb_core::read_rgb(&png, None).unwrap();
+    let cfg: toml::Table = std::fs::read_to_string(out.join("config.toml"))
+        .unwrap()
+        .parse()
+        .unwrap();
+    let reference = &cfg["method"]["reference"];
+    let pair = reference["images"][0].as_str().unwrap();
+    assert_eq!(
+        pair,
+        format!("{view}.png={}", s(&std::path::absolute(&png).unwrap()))
+    );
+    assert_eq!(reference["auto"]["view"].as_str(), Some(view.as_str()));
+    assert_eq!(reference["auto"]["with"].as_str(), Some("fsr"));
+    assert_eq!(reference["auto"]["fsr"]["block"].as_integer(), Some(16));
+    // the fill removed the object
+    let v = scene.views.iter().find(|v| &v.name == view).unwrap();
+    let mask = &v.mask.as_ref().unwrap().data;
+    let clean = gb_core::read_rgb(&d.join("clean").join(format!("{view}.png")), None).unwrap();
+    assert!(masked_psnr(&filled, &clean, mask) > masked_psnr(&v.image, &clean, mask) + 3.0);
+}
+
 /// Masked PSNR (dB) of `a` against `b`.
 fn masked_psnr(a: &RgbImage, b: &RgbImage, mask: &[bool]) -> f64 {
     gb_eval::psnr(a, b, &gb_eval::Region::Mask(mask.to_vec())).unwrap()

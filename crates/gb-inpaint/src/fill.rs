@@ -295,3 +295,59 @@ pub fn fill(scene_dir: &Path, view: &str, opts: &FillOptions) -> Result<Fill, In
         })?;
     fill_view(&scene, scene_dir, view, opts)
 }
+
+/// The record of `--reference auto` in the run's method (`[reference.auto]`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AutoReference {
+    /// The filled training view.
+    pub view: String,
+    /// The fill.
+    pub with: FillWith,
+    /// Its settings.
+    pub fsr: gb_fill::FsrSettings,
+}
+
+/// `--reference auto` (issue 46): the middle masked training view of `scene` (the view that
+/// the reference oracle and `bench quality`'s reference rows use, so that an automatic
+/// reference compares like for like with the exact one), filled by frequency-selective
+/// reconstruction, is written to `dir/reference-auto-VIEW.png`. Returns its `VIEW.png=PATH`
+/// pair (the path absolute) and the record.
+pub fn auto_reference(
+    scene: &Scene,
+    scene_dir: &Path,
+    dir: &Path,
+) -> Result<(String, AutoReference), InpaintError> {
+    let masked: Vec<&gb_nerf::scene::View> = scene
+        .split(Split::Train)
+        .filter(|v| v.mask.as_ref().is_some_and(|m| m.data.iter().any(|b| *b)))
+        .collect();
+    let v = masked
+        .get(masked.len() / 2)
+        .ok_or_else(|| InpaintError::Spec {
+            field: "--reference auto".into(),
+            reason: format!(
+                "scene {} has no training view with a mask to fill",
+                scene_dir.display()
+            ),
+        })?;
+    let opts = FillOptions {
+        with: FillWith::Fsr,
+        ..FillOptions::default()
+    };
+    let filled = fill_view(scene, scene_dir, &v.name, &opts)?;
+    std::fs::create_dir_all(dir).map_err(|e| InpaintError::io(dir, e))?;
+    let png = std::path::absolute(dir.join(format!("reference-auto-{}.png", v.name)))
+        .map_err(|e| InpaintError::io(dir, e))?;
+    gb_core::write_rgb_png(&png, &filled.image)
+        .map_err(|e| InpaintError::io(&png, std::io::Error::other(e.to_string())))?;
+    tracing::info!(view = %v.name, path = %png.display(), "--reference auto: the view filled by fsr");
+    Ok((
+        format!("{}.png={}", v.name, png.display()),
+        AutoReference {
+            view: v.name.clone(),
+            with: opts.with,
+            fsr: opts.fsr,
+        },
+    ))
+}

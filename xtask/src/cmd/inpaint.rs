@@ -6,7 +6,7 @@
 //!     [--lora FILE] [--prompt P] [--negative-prompt N] [--normal-prompt G] [--device D]
 //!     [--precision f32|f16] [--out DIR] [--resume] [--steps N] [--seed N]
 //!     [--depth sparse|dense|none] [--personalize STEPS] [--baseline DIR] [--weights DIR]
-//!     [--orbit-frames N] [--reference VIEW=IMAGE ...] [--export full|none] [--probe]
+//!     [--orbit-frames N] [--reference VIEW=IMAGE|auto ...] [--export full|none] [--probe]
 //! ```
 //!
 //! - `--method`: a built-in method (`configs/methods/`: gb-nerf, gb-nerf-unseen, bsd,
@@ -125,8 +125,9 @@ pub struct Args {
     /// A reference view, repeatable: VIEW (a training view's file name) with the object
     /// removed, as IMAGE (a clean plate or any 2D fill, at the scene's image size). It
     /// supervises the colour inside VIEW's mask and is carried to the other views through
-    /// the rendered depth; the guidance acts only where no reference reaches.
-    #[arg(long = "reference", value_name = "VIEW=IMAGE")]
+    /// the rendered depth; the guidance acts only where no reference reaches. `auto`: the
+    /// middle masked training view filled by `fill --with fsr`, written into OUT.
+    #[arg(long = "reference", value_name = "VIEW=IMAGE|auto")]
     pub references: Vec<String>,
     /// The nerfstudio export of the inpainted scene, `OUT/export/`: full (every training view
     /// rendered, with depth and cameras) or none (on a real capture it takes about as long as

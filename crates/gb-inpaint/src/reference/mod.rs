@@ -101,6 +101,10 @@ pub struct ReferenceConfig {
     /// anchor), since colour and density share the hash grid's features.
     #[serde(default = "default_true")]
     pub shapes_geometry: bool,
+    /// How `--reference auto` made its reference (`crate::fill::auto_reference`); a record,
+    /// left out when there is none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub auto: Option<crate::fill::AutoReference>,
 }
 
 fn default_weight() -> f64 {
@@ -145,6 +149,7 @@ impl Default for ReferenceConfig {
             depth_tolerance: default_tolerance(),
             max_pixels_per_view: default_max_pixels(),
             shapes_geometry: true,
+            auto: None,
         }
     }
 }

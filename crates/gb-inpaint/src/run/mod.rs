@@ -67,7 +67,8 @@ pub struct RunSpec {
     /// Overrides the method's personalisation steps (`[personalize] steps`; 0: off).
     pub personalize: Option<usize>,
     /// Reference views, `VIEW=IMAGE` (`--reference`, repeatable; added to the method's
-    /// `[reference] images`; see [`crate::reference`]).
+    /// `[reference] images`; see [`crate::reference`]), or `auto`: the middle masked training
+    /// view filled by frequency-selective reconstruction ([`crate::fill::auto_reference`]).
     pub references: Vec<String>,
     /// The output folder.
     pub out: PathBuf,
@@ -221,7 +222,8 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     if let Some(steps) = spec.personalize {
         method.personalize.steps = steps;
     }
-    for raw in &spec.references {
+    let auto_reference = spec.references.iter().any(|r| r == "auto");
+    for raw in spec.references.iter().filter(|r| *r != "auto") {
         let pair =
             crate::reference::ReferencePair::parse(raw).map_err(|reason| InpaintError::Spec {
                 field: "--reference".into(),
@@ -243,6 +245,11 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
 
     let (scene_dir, mut scene) = setup::load_or_generate(spec)?;
     setup::require_masks(&scene)?;
+    if auto_reference {
+        let (pair, record) = crate::fill::auto_reference(&scene, &scene_dir, &spec.out)?;
+        method.reference.images.push(pair);
+        method.reference.auto = Some(record);
+    }
     let references = crate::reference::load_references(
         &scene,
         &method.reference.images,
