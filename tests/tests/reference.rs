@@ -365,12 +365,9 @@ fn reference_auto_fills_the_middle_masked_view() {
     let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let (d, scene) = scene(dir.path());
-    let masked: Vec<String> = scene
-        .split(Split::Train)
-        .filter(|v| v.mask.as_ref().is_some_and(|m| m.data.iter().any(|b| *b)))
-        .map(|v| v.name.clone())
-        .collect();
-    let view = &masked[masked.len() / 2];
+    let view = &gb_inpaint::reference::middle_masked_view(&scene)
+        .unwrap()
+        .name;
     let out = dir.path().join("out");
     let spec = gb_inpaint::RunSpec {
         scene: Some(d.clone()),

@@ -3,7 +3,8 @@
 //!
 //! - **Quality.** For each scene of `--scenes` and seed of `--seeds` (default: the tuning
 //!   seeds 100 and 101), the procedural scene is generated as `bench quality` generates it,
-//!   and its reference view (the middle masked training view, [`crate::quality::reference_view`])
+//!   and its reference view (the middle masked training view,
+//!   [`gb_inpaint::reference::middle_masked_view`], the one `--reference auto` fills)
 //!   is filled by each fill (`fsr`, `smooth`, `prior`). Each is scored against the scene's
 //!   `clean/` view: PSNR over the masked pixels and SSIM over the mask's bounding box; the
 //!   unfilled view (the object) is the reference row.
@@ -99,18 +100,12 @@ fn quality(args: &Args) -> anyhow::Result<Value> {
                 seed,
                 ..Default::default()
             };
-            let generated = procedural::write(&opts, &dir)
+            procedural::write(&opts, &dir)
                 .with_context(|| format!("generating {name} into {}", dir.display()))?;
-            let view = crate::quality::reference_view(&generated)
-                .with_context(|| format!("{}: no masked training view", dir.display()))?
-                .name
-                .clone();
             let (_, scene) = gb_nerf::scene::load(&dir, &gb_nerf::scene::LoadOptions::default())?;
-            let v = scene
-                .views
-                .iter()
-                .find(|v| v.name == view)
-                .context("the reference view")?;
+            let v = gb_inpaint::reference::middle_masked_view(&scene)
+                .with_context(|| format!("{}: no masked training view", dir.display()))?;
+            let view = v.name.clone();
             let mask = &v.mask.as_ref().context("the reference view's mask")?.data;
             let clean_png = dir.join("clean").join(format!("{view}.png"));
             let truth = gb_core::read_rgb(&clean_png, None)

@@ -116,7 +116,6 @@ impl CropGeometry {
     }
 }
 
-/// Continuous pixel positions (pixel-centre convention) of the `r x r` crop of `bbox`.
 /// The mask's bounding box `(x0, y0, x1, y1)` (exclusive ends) grown by `margin` of its
 /// size on each side and clamped to the image; `None` for an empty mask.
 pub fn grown_bbox(mask: &Mask, margin: f32) -> Option<(usize, usize, usize, usize)> {
@@ -130,6 +129,7 @@ pub fn grown_bbox(mask: &Mask, margin: f32) -> Option<(usize, usize, usize, usiz
     Some((x0, y0, x1, y1))
 }
 
+/// Continuous pixel positions (pixel-centre convention) of the `r x r` crop of `bbox`.
 fn crop_positions(bbox: (usize, usize, usize, usize), r: usize) -> Vec<[f32; 2]> {
     let (x0, y0, x1, y1) = bbox;
     let (bw, bh) = ((x1 - x0) as f32, (y1 - y0) as f32);

@@ -318,19 +318,13 @@ pub fn auto_reference(
     scene_dir: &Path,
     dir: &Path,
 ) -> Result<(String, AutoReference), InpaintError> {
-    let masked: Vec<&gb_nerf::scene::View> = scene
-        .split(Split::Train)
-        .filter(|v| v.mask.as_ref().is_some_and(|m| m.data.iter().any(|b| *b)))
-        .collect();
-    let v = masked
-        .get(masked.len() / 2)
-        .ok_or_else(|| InpaintError::Spec {
-            field: "--reference auto".into(),
-            reason: format!(
-                "scene {} has no training view with a mask to fill",
-                scene_dir.display()
-            ),
-        })?;
+    let v = crate::reference::middle_masked_view(scene).ok_or_else(|| InpaintError::Spec {
+        field: "--reference auto".into(),
+        reason: format!(
+            "scene {} has no training view with a mask to fill",
+            scene_dir.display()
+        ),
+    })?;
     let opts = FillOptions {
         with: FillWith::Fsr,
         ..FillOptions::default()

@@ -248,6 +248,16 @@ fn spec_error(pair: &str, reason: String) -> InpaintError {
     }
 }
 
+/// The middle one of the training views of `scene` with a non-empty mask: the view that
+/// `--reference auto` fills and that `bench quality`'s reference rows use.
+pub fn middle_masked_view(scene: &Scene) -> Option<&gb_nerf::scene::View> {
+    let masked: Vec<&gb_nerf::scene::View> = scene
+        .split(Split::Train)
+        .filter(|v| v.mask.as_ref().is_some_and(|m| m.data.iter().any(|b| *b)))
+        .collect();
+    masked.get(masked.len() / 2).copied()
+}
+
 /// Whether `name` (a file name or stem) names the view `stem`.
 fn names_view(name: &str, stem: &str) -> bool {
     name == stem || Path::new(name).file_stem().is_some_and(|s| s == stem)

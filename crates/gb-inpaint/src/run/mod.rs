@@ -330,10 +330,11 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
             ckpt.display()
         );
     }
-    if method.geometry.enabled() && !method.holds_geometry(!references.is_empty()) {
+    let holds_geometry = method.holds_geometry(!references.is_empty());
+    if method.geometry.enabled() && !holds_geometry {
         tracing::info!("geometry: no term inside the mask to hold against, so no unguided pass");
     }
-    let hidden_depth = if method.holds_geometry(!references.is_empty()) {
+    let hidden_depth = if holds_geometry {
         Some(unguided_depth(
             &scene,
             &config,
