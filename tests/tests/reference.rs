@@ -237,6 +237,7 @@ fn fill_pastes_the_prior_s_sample_into_the_mask_only() {
     let view = masked_view(&scene);
     let prior = gb_tests::workspace_root().join(gb_tests::FIXTURE_PRIOR);
     let opts = gb_inpaint::fill::FillOptions {
+        with: FillWith::Prior,
         prior: s(&prior).into(),
         lora: Some(Vec::new()),
         steps: 2,
@@ -285,6 +286,8 @@ fn fill_pastes_the_prior_s_sample_into_the_mask_only() {
         s(&d),
         "--view",
         &format!("{view}.png"),
+        "--with",
+        "prior",
         "--prior",
         s(&prior),
         "--steps",

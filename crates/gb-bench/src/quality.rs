@@ -35,6 +35,8 @@
 //! `--fill-reference` adds `reference-fill`: the same view filled in 2D by the grid's prior
 //! (`cargo xtask fill`, its default settings, the prior's own LoRA) as the reference, which
 //! is what a user without a clean plate or a 2D tool runs.
+//! `--auto-reference` adds `reference-auto`: the same view filled by frequency-selective
+//! reconstruction, as `inpaint --reference auto` fills it, no weights.
 
 use std::path::{Path, PathBuf};
 
@@ -77,6 +79,10 @@ pub struct Args {
     /// the grid's prior fills in 2D (`cargo xtask fill`).
     #[arg(long)]
     pub fill_reference: bool,
+    /// Add the row `reference-auto` (module docs): the `none` method with `--reference
+    /// auto`, the reference filled by frequency-selective reconstruction, no weights.
+    #[arg(long)]
+    pub auto_reference: bool,
 }
 
 /// An oracle row of `bench quality --oracle` (module docs).
@@ -97,6 +103,8 @@ pub struct ExtraRows {
     pub oracle: Vec<OracleRow>,
     /// `reference-fill` (`--fill-reference`).
     pub fill: bool,
+    /// `reference-auto` (`--auto-reference`).
+    pub auto: bool,
 }
 
 /// The name of the oracle row of `--oracle`.
@@ -118,6 +126,9 @@ pub const PRIOR_ORACLE_STEPS: usize = 300;
 
 /// The name of the row of `--fill-reference`.
 pub const REFERENCE_FILL: &str = "reference-fill";
+
+/// The name of the row of `--auto-reference`.
+pub const REFERENCE_AUTO: &str = "reference-auto";
 
 /// The middle masked training view of a generated scene: the reference view of the
 /// `reference-*` rows.
@@ -235,6 +246,7 @@ pub fn write_reference_fill(
     let png = dir.join(format!("{REFERENCE_FILL}-{}.png", view.name));
     if !png.is_file() {
         let opts = gb_inpaint::fill::FillOptions {
+            with: gb_inpaint::fill::FillWith::Prior,
             prior: prior.to_string(),
             device,
             ..Default::default()
@@ -252,6 +264,23 @@ pub fn write_reference_fill(
              (cargo xtask fill) is the reference"
         ),
         &view.name,
+        &png,
+    )
+}
+
+/// Writes `dir/reference-auto.toml` (module docs): the `none` method with the reference that
+/// `inpaint --reference auto` makes ([`gb_inpaint::fill::auto_reference`]: the middle masked
+/// training view filled by frequency-selective reconstruction), the fill saved beside it.
+pub fn write_reference_auto(scene_dir: &Path, dir: &Path) -> anyhow::Result<PathBuf> {
+    let (_, scene) = gb_nerf::scene::load(scene_dir, &gb_nerf::scene::LoadOptions::default())?;
+    let (_, auto) = gb_inpaint::fill::auto_reference(&scene, scene_dir, dir)?;
+    let png = dir.join(format!("reference-auto-{}.png", auto.view));
+    write_reference_method(
+        dir,
+        REFERENCE_AUTO,
+        "no prior in the NeRF; one training view filled in 2D by frequency-selective \
+         reconstruction (inpaint --reference auto, no weights) is the reference",
+        &auto.view,
         &png,
     )
 }
@@ -415,6 +444,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ExtraRows {
                 oracle: args.oracle.clone().unwrap_or_default(),
                 fill: args.fill_reference,
+                auto: args.auto_reference,
             },
         )?;
         let path = args.out.join(format!("quality-{name}-{stamp}.json"));
@@ -487,6 +517,9 @@ pub fn run_scene(
             extra_files.push(write_reference_fill(
                 &generated, &scene_dir, &runs, &prior, device,
             )?);
+        }
+        if extra.auto {
+            extra_files.push(write_reference_auto(&scene_dir, &runs)?);
         }
         if !extra_files.is_empty() {
             let mut list = methods.unwrap_or_else(|| grid::grid_methods(None));
@@ -639,6 +672,59 @@ mod tests {
         assert_eq!(reference.reference.images.len(), 1);
         assert!(reference.reference.images[0].starts_with("view_003.png="));
         assert!(reference.reference.images[0].ends_with("scene/x.png"));
+    }
+
+    /// `reference-auto` is `none` with the fsr fill of the view that the reference oracle
+    /// uses: the fill is written, it matches the view outside the mask and is closer to the
+    /// clean view than the object inside it.
+    #[test]
+    fn the_auto_reference_row_fills_the_oracle_s_view_by_fsr() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene_dir = dir.path().join("scene");
+        let opts = ProceduralOptions {
+            width: 64,
+            height: 48,
+            views: 8,
+            test_views: 2,
+            ..Default::default()
+        };
+        let generated = procedural::write(&opts, &scene_dir).unwrap();
+        let view = reference_view(&generated).unwrap();
+        let path = write_reference_auto(&scene_dir, &dir.path().join("runs")).unwrap();
+        let method = gb_inpaint::MethodConfig::load(path.to_str().unwrap()).unwrap();
+        assert_eq!(
+            (method.name.as_str(), method.rgb.is_none()),
+            (REFERENCE_AUTO, true)
+        );
+        assert_eq!(method.reference.images.len(), 1);
+        let (name, png) = method.reference.images[0].split_once('=').unwrap();
+        assert_eq!(name, format!("{}.png", view.name));
+        let filled = gb_core::read_rgb(std::path::Path::new(png), None).unwrap();
+        let clean = gb_core::read_rgb(
+            &scene_dir.join("clean").join(format!("{}.png", view.name)),
+            None,
+        )
+        .unwrap();
+        let object = gb_core::read_rgb(
+            &scene_dir
+                .join("images_1")
+                .join(format!("{}.png", view.name)),
+            None,
+        )
+        .unwrap();
+        let (mut err_fill, mut err_object) = (0.0f64, 0.0f64);
+        for (i, &m) in view.mask.data.iter().enumerate() {
+            for c in 0..3 {
+                let k = 3 * i + c;
+                if m {
+                    err_fill += (filled.data[k] - clean.data[k]).powi(2) as f64;
+                    err_object += (object.data[k] - clean.data[k]).powi(2) as f64;
+                } else {
+                    assert_eq!(filled.data[k], object.data[k], "pixel {i} outside the mask");
+                }
+            }
+        }
+        assert!(err_fill < 0.5 * err_object, "{err_fill} vs {err_object}");
     }
 
     #[test]

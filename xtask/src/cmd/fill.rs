@@ -2,7 +2,7 @@
 //! `inpaint --reference VIEW=IMAGE`.
 //!
 //! ```text
-//! cargo xtask fill --scene DIR --view VIEW --out IMAGE [--with fsr|smooth|prior]
+//! cargo xtask fill --scene DIR --view VIEW --out IMAGE [--with fsr|smooth|prior]  (default fsr)
 //!     [--prior tiny|DIR|HUB_ID]
 //!     [--lora FILE ...] [--prompt P] [--negative-prompt N] [--steps 50] [--guidance 7.5]
 //!     [--seed 0] [--device D]
@@ -27,9 +27,10 @@ pub struct Args {
     /// Output PNG: the view at its full size, the masked pixels filled.
     #[arg(long)]
     out: PathBuf,
-    /// The fill: `fsr` (frequency-selective reconstruction, no weights), `smooth` (the
-    /// membrane fill, no weights) or `prior` (the diffusion prior; the flags below).
-    #[arg(long, value_enum, default_value_t = With::Prior)]
+    /// The fill: `fsr` (frequency-selective reconstruction, no weights; the default),
+    /// `smooth` (the membrane fill, no weights) or `prior` (the diffusion prior; the flags
+    /// below).
+    #[arg(long, value_enum, default_value_t = With::Fsr)]
     with: With,
     /// `tiny` (the built-in prior), a diffusers inpainting folder or a hub id.
     #[arg(long, default_value = "tiny")]
