@@ -34,6 +34,10 @@ fn gpu_bench_smoke_writes_every_section() {
     assert_eq!(doc["smoke"], true);
     assert_eq!(doc["device"], device);
     assert!(doc["machine"]["cpu"].is_string());
+    // neither flex nor lavapipe is a GPU card, and the report says so
+    assert_eq!(doc["adapter"]["backend"], device);
+    assert_eq!(doc["adapter"]["is_gpu_card"], false);
+    assert_ne!(doc["adapter"]["type"], "gpu card");
     let positive = |v: &serde_json::Value, what: &str| {
         let s = v.as_f64().unwrap_or_else(|| panic!("{what}: {v}"));
         assert!(s > 0.0 && s.is_finite(), "{what}: {s}");
@@ -77,6 +81,42 @@ fn gpu_bench_smoke_writes_every_section() {
     let ratio = positive(&rows[0]["device_over_flex"], "ratio");
     assert!((ratio - on_device / on_flex).abs() <= 1e-9 * ratio);
     positive(&doc["wall_s"], "wall");
+}
+
+/// Without `--smoke`, a device that is no GPU card (flex; wgpu on lavapipe, when this machine
+/// tests wgpu) is refused before anything runs, with the adapter's name, and no report.
+#[test]
+fn gpu_bench_refuses_a_device_that_is_no_gpu_card() {
+    let mut devices = vec!["flex"];
+    if gb_core::test_backends().contains(&BackendKind::Wgpu)
+        && !gb_core::backend::is_gpu_card(&BackendKind::Wgpu.device())
+    {
+        devices.push("wgpu");
+    }
+    for device in devices {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("gpu.json");
+        let run = xtask(&[
+            "bench",
+            "gpu",
+            "--no-setup",
+            "--python",
+            "none",
+            "--device",
+            device,
+            "--out",
+            path.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "{device}: {err}");
+        assert!(
+            err.contains(&format!("--device {device}: the adapter '")),
+            "{err}"
+        );
+        assert!(err.contains("is no GPU card"), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!path.exists(), "{device}: a report was written");
+    }
 }
 
 #[test]

@@ -18,6 +18,11 @@
 //! - NeRF `fast` and `balanced` steps/s on the device against flex on this machine's cores;
 //! - the peak GPU memory (`nvidia-smi`) over the whole run.
 //!
+//! Without `--smoke` it measures a GPU card or nothing: an adapter that is no card (a CPU
+//! backend, or Mesa's lavapipe, a CPU behind Vulkan) is refused with its name before anything
+//! runs. The report records the adapter (name, type, kernel target, backend, driver) and
+//! takes its file name from the adapter's name.
+//!
 //! `--smoke` runs the same code at tiny sizes (the built-in tiny prior's U-Net and VAE, its
 //! prior in the pipeline step, a few NeRF steps, no Python reference, no setup), on any
 //! device, lavapipe included, so that GPU time is never spent finding a bug.
@@ -112,6 +117,18 @@ impl Sizes {
 
 /// Runs the benchmark (see the module docs).
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // a device that opens and is no card is refused before the setup; one that cannot open
+    // yet (no Vulkan loader before the setup installs it) is refused by the release run
+    let adapter = Adapter::open(args.device);
+    if !args.smoke && !adapter.is_card && (adapter.error.is_none() || args.no_setup) {
+        bail!(
+            "--device {}: the adapter '{}' is no GPU card ({}): bench gpu would time a CPU. \
+             Run it on a GPU card, or add --smoke to check the command on any device",
+            args.device.name(),
+            adapter.name,
+            adapter.kind()
+        );
+    }
     if !args.smoke && !args.no_setup {
         return setup_then_rerun(&args);
     }
@@ -170,6 +187,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "date": today(),
         "machine": machine_description(),
         "gpu": gpu_label,
+        "adapter": adapter.to_json(),
         "device": kind.name(),
         "wgpu_compiler": WGPU_COMPILER,
         "profile": if cfg!(debug_assertions) { "dev (deps at opt-level 3)" } else { "release" },
@@ -202,8 +220,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     let name = match (&args.out, args.smoke) {
         (Some(_), _) => String::new(),
-        (None, true) => format!("gpu-smoke-{}-{}.json", kind.name(), today()),
-        (None, false) => format!("gpu-{}-{}.json", slug(gpu_label.as_deref()), today()),
+        (None, true) => format!(
+            "gpu-smoke-{}-{}-{}.json",
+            kind.name(),
+            slug(Some(&adapter.name)),
+            today()
+        ),
+        (None, false) => format!("gpu-{}-{}.json", slug(Some(&adapter.name)), today()),
     };
     let out = args
         .out
@@ -217,6 +240,85 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .into_owned();
     write_report(dir, &file, &doc)?;
     Ok(())
+}
+
+/// The adapter that a backend opens (module docs).
+#[derive(Debug, Clone)]
+pub struct Adapter {
+    /// The backend.
+    pub backend: BackendKind,
+    /// The name the device gives itself (`NVIDIA H100 80GB HBM3`, `llvmpipe (LLVM 15.0.6,
+    /// 256 bits)`), or the backend's for a CPU backend.
+    pub name: String,
+    /// What its kernels are compiled for (CubeCL's fingerprint), when it reports one.
+    pub target: Option<String>,
+    /// Whether it is a GPU card ([`gb_core::backend::is_gpu_card`]).
+    pub is_card: bool,
+    /// Why it could not be opened, when it could not.
+    pub error: Option<String>,
+}
+
+impl Adapter {
+    /// Opens `backend`'s device and reads who it is; a device that fails to open (no Vulkan
+    /// loader) is an adapter that is no card, with the failure.
+    pub fn open(backend: BackendKind) -> Self {
+        let opened = std::panic::catch_unwind(|| backend.device().identity());
+        let (identity, error) = match opened {
+            Ok(id) => (id, None),
+            Err(e) => (
+                None,
+                Some(
+                    e.downcast_ref::<String>()
+                        .cloned()
+                        .or_else(|| e.downcast_ref::<&str>().map(|s| s.to_string()))
+                        .unwrap_or_else(|| "the device failed to open".into()),
+                ),
+            ),
+        };
+        Self {
+            backend,
+            name: match (&identity, &error) {
+                (Some(id), _) => id.name.clone(),
+                (None, Some(_)) => format!("{} (did not open)", backend.name()),
+                (None, None) => format!("{} (CPU backend)", backend.name()),
+            },
+            target: identity.as_ref().map(|id| id.fingerprint.clone()),
+            is_card: identity.is_some_and(|id| id.physical.is_some()),
+            error,
+        }
+    }
+
+    /// Its type in words.
+    pub fn kind(&self) -> &'static str {
+        match (self.is_card, self.backend) {
+            (true, _) => "gpu card",
+            (false, BackendKind::Wgpu) => {
+                "no card: a CPU or a software rasterizer such as lavapipe"
+            }
+            (false, _) => "cpu",
+        }
+    }
+
+    /// The report's `adapter` section: name, type, kernel target, backend, shader compiler,
+    /// and the driver (`nvidia-smi`'s, on a card that has it).
+    pub fn to_json(&self) -> Value {
+        let driver = if self.is_card {
+            super::pipeline::gpu_name()
+                .and_then(|g| g.split(',').nth(1).map(|d| d.trim().to_string()))
+        } else {
+            None
+        };
+        json!({
+            "name": self.name,
+            "type": self.kind(),
+            "is_gpu_card": self.is_card,
+            "target": self.target,
+            "backend": self.backend.name(),
+            "shader_compiler": (self.backend == BackendKind::Wgpu).then_some(WGPU_COMPILER),
+            "driver": driver,
+            "error": self.error,
+        })
+    }
 }
 
 /// The shader compiler `--device wgpu` uses on a Vulkan adapter in this build.
