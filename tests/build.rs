@@ -1,5 +1,7 @@
 //! Marks the tests that need the shared test data as ignored when it is missing: the check
-//! lives in gb-core's `testdata.rs`, compiled here as a module (see its docs).
+//! lives in gb-core's `testdata.rs`, compiled here as a module (see its docs). Marks the test
+//! of the Slurm array job (`grid_slurm.rs`) as ignored when the build sees no Slurm to test
+//! against: neither `SLURM_CONF` nor `GB_TEST_SLURM` (which `.ci/run` sets) is set.
 
 #[allow(dead_code)]
 #[path = "../crates/gb-core/src/testdata.rs"]
@@ -7,4 +9,10 @@ mod testdata;
 
 fn main() {
     testdata::emit_build_script_cfg();
+    println!("cargo::rustc-check-cfg=cfg(gb_no_slurm)");
+    println!("cargo::rerun-if-env-changed=SLURM_CONF");
+    println!("cargo::rerun-if-env-changed=GB_TEST_SLURM");
+    if std::env::var_os("SLURM_CONF").is_none() && std::env::var_os("GB_TEST_SLURM").is_none() {
+        println!("cargo::rustc-cfg=gb_no_slurm");
+    }
 }

@@ -168,7 +168,7 @@ const PHASES: [&str; 6] = [
 fn profiled_step(t: &mut GuidedTrainer, view: usize) -> anyhow::Result<[f64; 6]> {
     let step = t.nerf.step;
     let mut clock = Instant::now();
-    let recon = t.nerf.reconstruction_loss();
+    let recon = t.nerf.reconstruction_loss()?;
     let recon_s = lap(&mut clock);
     let (rgb, _) = t.rgb_prior_input(view)?;
     sync(rgb.clone());

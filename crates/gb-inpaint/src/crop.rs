@@ -25,7 +25,7 @@
 use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Int, Tensor, TensorData};
-use gb_core::RgbImage;
+use gb_core::{RgbImage, TensorValuesError};
 use gb_diffusion::distill::prior_input::bilinear_resize;
 use gb_diffusion::distill::{LatentEncoder, PriorInputMode};
 use gb_nerf::field::NerfField;
@@ -286,7 +286,7 @@ fn render_pixels(
     pixels: &[[f32; 2]],
     want_normals: bool,
     appearance_only: bool,
-) -> (Tensor<2>, Tensor<1>, Option<Tensor<2>>) {
+) -> Result<(Tensor<2>, Tensor<1>, Option<Tensor<2>>), TensorValuesError> {
     let rays = camera_rays(camera, pixels, ctx.space, ctx.near, ctx.far);
     let samples = sample_and_prune::<ChaCha8Rng>(
         ctx.field,
@@ -295,7 +295,7 @@ fn render_pixels(
         ctx.samples_per_ray,
         ctx.occupancy,
         None,
-    );
+    )?;
     let out = if appearance_only {
         render_samples_appearance_only(ctx.field, &samples, ctx.background)
     } else {
@@ -313,7 +313,7 @@ fn render_pixels(
         )),
         _ => None,
     };
-    (out.rgb, out.depth, normals)
+    Ok((out.rgb, out.depth, normals))
 }
 
 /// `[N, C]` values of the rows `rows` of an `R x R` image, other rows zero, as
@@ -344,47 +344,47 @@ fn like_device(x: Tensor<4>, like: &Tensor<4>) -> Tensor<4> {
 }
 
 /// The RGB prior input `[1, 3, R, R]` in `[0, 1]` (module docs), and the number of rays
-/// rendered.
+/// rendered. Errors when early ray termination cannot read the field's densities.
 pub fn render_rgb_input(
     ctx: &RenderContext<'_>,
     view: &ViewGuidance,
     mode: PriorInputMode,
-) -> (Tensor<4>, usize) {
+) -> Result<(Tensor<4>, usize), TensorValuesError> {
     let g = &view.geometry;
     let r = g.resolution;
     let camera = g.camera(r);
     let grid = all_pixels(r, r);
     match mode {
         PriorInputMode::RenderOnly => {
-            let (rgb, _, _) = render_pixels(ctx, &camera, &grid, false, ctx.rgb_appearance_only);
+            let (rgb, _, _) = render_pixels(ctx, &camera, &grid, false, ctx.rgb_appearance_only)?;
             let image = rgb.reshape([r, r, 3]).permute([2, 0, 1]).unsqueeze_dim(0);
-            (image, r * r)
+            Ok((image, r * r))
         }
         PriorInputMode::PasteOnGroundTruth => {
             let pixels: Vec<[f32; 2]> = g.masked.iter().map(|&i| grid[i]).collect();
-            let (rgb, _, _) = render_pixels(ctx, &camera, &pixels, false, ctx.rgb_appearance_only);
+            let (rgb, _, _) = render_pixels(ctx, &camera, &pixels, false, ctx.rgb_appearance_only)?;
             let inside = scatter_rows(rgb, &g.masked, r);
             let keep = view.mask.ones_like() - view.mask.clone();
             let outside = like_device(view.ground_truth.clone() * keep.repeat_dim(1, 3), &inside);
-            (inside + outside, pixels.len())
+            Ok((inside + outside, pixels.len()))
         }
     }
 }
 
 /// The normal-map prior input `[1, 3, R, R]` = `(n + 1) / 2` (module docs), and the number
-/// of rays rendered.
+/// of rays rendered. Errors when early ray termination cannot read the field's densities.
 pub fn render_normal_input(
     ctx: &RenderContext<'_>,
     view: &ViewGuidance,
     divisor: usize,
-) -> (Tensor<4>, usize) {
+) -> Result<(Tensor<4>, usize), TensorValuesError> {
     let g = &view.geometry;
     let r = g.resolution;
     let rn = (r / divisor.max(1)).max(4).min(r);
     let camera = g.camera(rn);
     let grid = all_pixels(rn, rn);
     let want_gradient = matches!(ctx.normals, NormalSource::DensityGradient { .. });
-    let (_, depth, normals) = render_pixels(ctx, &camera, &grid, want_gradient, false);
+    let (_, depth, normals) = render_pixels(ctx, &camera, &grid, want_gradient, false)?;
     let plane_fit = |cfg: PlaneFitConfig| {
         depth_to_normals(
             depth.clone().reshape([rn, rn]),
@@ -408,7 +408,7 @@ pub fn render_normal_input(
     } else {
         bilinear_resize(image, r, r)
     };
-    (image, rn * rn)
+    Ok((image, rn * rn))
 }
 
 /// True when `view` has a mask with at least one pixel at its own resolution (a view the

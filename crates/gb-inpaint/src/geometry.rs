@@ -17,6 +17,7 @@
 //! again on resume (it is deterministic), so checkpoints do not hold it.
 
 use burn::tensor::Tensor;
+use gb_core::TensorValuesError;
 use gb_nerf::render::{render_samples, sample_and_prune};
 use gb_nerf::sampler::RayBatch;
 use gb_nerf::train::data::TrainView;
@@ -200,15 +201,15 @@ impl HiddenDepth {
     }
 
     /// The term of one step (module docs), drawn from a stream seeded by `seed`; `None`
-    /// without pixels.
+    /// without pixels. Errors when early ray termination cannot read the field's densities.
     pub fn loss(
         &self,
         ctx: &RenderContext<'_>,
         views: &[TrainView],
         seed: u64,
-    ) -> Option<Tensor<1>> {
+    ) -> Result<Option<Tensor<1>>, TensorValuesError> {
         if self.pixels.is_empty() || !self.config.enabled() {
-            return None;
+            return Ok(None);
         }
         let n = self.config.rays;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -217,7 +218,10 @@ impl HiddenDepth {
         for _ in 0..n {
             let p = self.pixels[rng.random_range(0..self.pixels.len())];
             target.extend(disparity_pair(ctx.near, p.depth));
-            rays.append(ctx.ray_through(&views.get(p.view)?.camera, p.pixel));
+            let Some(view) = views.get(p.view) else {
+                return Ok(None);
+            };
+            rays.append(ctx.ray_through(&view.camera, p.pixel));
         }
         let samples = sample_and_prune(
             ctx.field,
@@ -226,7 +230,7 @@ impl HiddenDepth {
             ctx.samples_per_ray,
             ctx.occupancy,
             Some(&mut rng),
-        );
+        )?;
         let out = render_samples(ctx.field, &samples, ctx.background);
         let mut loss = Tensor::<1>::zeros([1], &ctx.field.device());
         if self.config.depth_weight > 0.0 {
@@ -237,7 +241,7 @@ impl HiddenDepth {
             let dl = distortion_of(out.weights, &rays, &samples, ctx.space.spacing());
             loss = loss + dl.mul_scalar(self.config.distortion_weight);
         }
-        Some(loss)
+        Ok(Some(loss))
     }
 }
 

@@ -622,7 +622,11 @@ impl GuidedTrainer {
         let ctx = self.render_context();
         let result = state
             .refresh(&ctx, &self.nerf.data.views, step)
-            .map(|_| state.loss(&ctx, &self.nerf.data.views, seed));
+            .and_then(|_| {
+                state
+                    .loss(&ctx, &self.nerf.data.views, seed)
+                    .map_err(|e| InpaintError::from(gb_nerf::train::NerfError::from(e)))
+            });
         let carried = state.carried.as_ref().map_or(0, |c| c.pixels.len());
         self.reference = Some(state);
         Ok(result?.map(|t| (t, carried)))
@@ -690,7 +694,8 @@ impl GuidedTrainer {
         self.view_guidance(view)?;
         let mode = self.method.prior_input;
         let vg = self.cached(view)?;
-        let (image, rays) = render_rgb_input(&self.render_context(), vg, mode);
+        let (image, rays) = render_rgb_input(&self.render_context(), vg, mode)
+            .map_err(gb_nerf::train::NerfError::from)?;
         Ok((self.gate_observed(view, image)?, rays))
     }
 
@@ -702,7 +707,8 @@ impl GuidedTrainer {
         self.view_guidance(view)?;
         let divisor = self.method.normal_render_divisor;
         let vg = self.cached(view)?;
-        let (image, rays) = render_normal_input(&self.render_context(), vg, divisor);
+        let (image, rays) = render_normal_input(&self.render_context(), vg, divisor)
+            .map_err(gb_nerf::train::NerfError::from)?;
         Ok((self.gate_observed(view, image)?, rays))
     }
 
@@ -973,13 +979,17 @@ impl GuidedTrainer {
     pub fn train_step(&mut self) -> Result<StepRecord, InpaintError> {
         let start = Instant::now();
         let step = self.nerf.step;
-        let recon = self.nerf.reconstruction_loss();
+        let recon = self.nerf.reconstruction_loss()?;
         let (terms, records) = self.guidance_terms(step)?;
         let reference = self.reference_term(step)?;
-        let geometry = self.hidden_depth.as_ref().and_then(|h| {
-            let seed = derive_seed(self.nerf.config.train.seed, step, GEOMETRY_SALT);
-            h.loss(&self.render_context(), &self.nerf.data.views, seed)
-        });
+        let geometry = match self.hidden_depth.as_ref() {
+            Some(h) => {
+                let seed = derive_seed(self.nerf.config.train.seed, step, GEOMETRY_SALT);
+                h.loss(&self.render_context(), &self.nerf.data.views, seed)
+                    .map_err(gb_nerf::train::NerfError::from)?
+            }
+            None => None,
+        };
         let mut loss = recon.loss.clone();
         if let Some(g) = geometry {
             loss = loss + g;

@@ -289,7 +289,7 @@ pub(crate) fn render_depth(
             ctx.occupancy,
             ctx.background,
             None,
-        );
+        )?;
         out.extend(f32_values(o.depth.into_data(), "visibility depth")?);
         start = end;
     }

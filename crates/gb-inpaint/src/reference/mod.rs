@@ -41,7 +41,7 @@ pub mod carry;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::{Tensor, TensorData};
-use gb_core::RgbImage;
+use gb_core::{RgbImage, TensorValuesError};
 use gb_nerf::render::{render_samples, render_samples_fixed_geometry, sample_and_prune};
 use gb_nerf::sampler::RayBatch;
 use gb_nerf::scene::{Scene, Split};
@@ -406,18 +406,21 @@ impl ReferenceState {
     }
 
     /// The reference term of `step` (module docs), drawn from a stream seeded by `seed`.
+    /// Errors when early ray termination cannot read the field's densities.
     pub fn loss(
         &self,
         ctx: &RenderContext<'_>,
         views: &[TrainView],
         seed: u64,
-    ) -> Option<ReferenceTerm> {
+    ) -> Result<Option<ReferenceTerm>, TensorValuesError> {
         // before the first refresh (the term's start) there is no anchor and no term
-        let set = self.carried.as_ref()?;
+        let Some(set) = self.carried.as_ref() else {
+            return Ok(None);
+        };
         let direct: usize = self.views.iter().map(|r| r.pixels.len()).sum();
         let carried = set.pixels.len();
         if direct + carried == 0 || self.config.weight == 0.0 {
-            return None;
+            return Ok(None);
         }
         let n = self.config.rays;
         let n_carried = if carried == 0 {
@@ -437,14 +440,16 @@ impl ReferenceState {
                 (c.view as usize, c.x, c.y, c.rgb, c.depth)
             } else {
                 let mut i = rng.random_range(0..direct);
-                let (k_ref, r) = self.views.iter().enumerate().find(|(_, r)| {
+                let Some((k_ref, r)) = self.views.iter().enumerate().find(|(_, r)| {
                     if i < r.pixels.len() {
                         true
                     } else {
                         i -= r.pixels.len();
                         false
                     }
-                })?;
+                }) else {
+                    return Ok(None);
+                };
                 let [x, y] = r.pixels[i];
                 let depth = set
                     .anchors
@@ -456,7 +461,10 @@ impl ReferenceState {
             };
             anchor.extend(disparity_pair(ctx.near, depth));
             let px = [x as f32 + 0.5, y as f32 + 0.5];
-            rays.append(ctx.ray_through(&views.get(view)?.camera, px));
+            let Some(v) = views.get(view) else {
+                return Ok(None);
+            };
+            rays.append(ctx.ray_through(&v.camera, px));
             target.extend_from_slice(&rgb);
         }
         let device = ctx.field.device();
@@ -467,7 +475,7 @@ impl ReferenceState {
             ctx.samples_per_ray,
             ctx.occupancy,
             Some(&mut rng),
-        );
+        )?;
         let out = if self.config.shapes_geometry {
             render_samples(ctx.field, &samples, ctx.background)
         } else {
@@ -480,11 +488,11 @@ impl ReferenceState {
             let d = disparity_toward(out.disparity, anchor, ctx.near);
             loss = loss + d.mul_scalar(self.config.anchor_weight);
         }
-        Some(ReferenceTerm {
+        Ok(Some(ReferenceTerm {
             loss,
             direct_rays: n - n_carried,
             carried_rays: n_carried,
-        })
+        }))
     }
 }
 

@@ -69,7 +69,7 @@ pub(crate) fn render_pixels(
     camera: &Camera,
     pixels: &[[f32; 2]],
     settings: &ImageSettings,
-) -> (super::VolumeOutput, crate::sampler::SampleSet) {
+) -> Result<(super::VolumeOutput, crate::sampler::SampleSet), TensorValuesError> {
     let rays = camera_rays(camera, pixels, settings.space, settings.near, settings.far);
     let samples = sample_and_prune::<rand_chacha::ChaCha8Rng>(
         field,
@@ -78,11 +78,11 @@ pub(crate) fn render_pixels(
         settings.samples_per_ray,
         settings.occupancy,
         None,
-    );
-    (
+    )?;
+    Ok((
         render_samples(field, &samples, settings.background),
         samples,
-    )
+    ))
 }
 
 /// Renders every pixel of `camera` with a no-grad copy of `field`.
@@ -103,7 +103,7 @@ pub fn render_image(
     let mut normals = Vec::with_capacity(n);
     let mut evals = 0usize;
     for chunk in pixels.chunks(settings.chunk.max(1)) {
-        let (out, samples) = render_pixels(&field, camera, chunk, settings);
+        let (out, samples) = render_pixels(&field, camera, chunk, settings)?;
         evals += samples.slots.len();
         if let NormalSource::DensityGradient { step } = settings.normals {
             let nt = density_gradient_normals(

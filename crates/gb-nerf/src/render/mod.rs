@@ -9,6 +9,7 @@ pub mod termination;
 pub mod volume;
 
 use burn::tensor::{Int, Tensor, TensorData};
+use gb_core::TensorValuesError;
 use rand::Rng;
 
 use crate::field::NerfField;
@@ -130,7 +131,8 @@ fn render_samples_with(
 
 /// The samples of `rays` that the field evaluates: stratified (jittered when `rng` is
 /// given), without the empty cells of `occupancy` and, with its `early_stop_eps`, without
-/// the samples behind where each ray's transmittance runs out ([`termination`]).
+/// the samples behind where each ray's transmittance runs out ([`termination`]; densities
+/// that cannot be read back for it are the error).
 pub fn sample_and_prune<R: Rng>(
     field: &NerfField,
     rays: &RayBatch,
@@ -138,11 +140,11 @@ pub fn sample_and_prune<R: Rng>(
     samples_per_ray: usize,
     occupancy: Option<&OccupancyGrid>,
     rng: Option<&mut R>,
-) -> SampleSet {
+) -> Result<SampleSet, TensorValuesError> {
     let samples = sample_rays(rays, space, samples_per_ray, occupancy, rng);
     match occupancy {
         Some(grid) => termination::prune_occluded(field, samples, grid.early_stop_eps),
-        None => samples,
+        None => Ok(samples),
     }
 }
 
@@ -157,10 +159,10 @@ pub fn render_rays<R: Rng>(
     occupancy: Option<&OccupancyGrid>,
     background: Background,
     rng: Option<&mut R>,
-) -> (VolumeOutput, SampleSet) {
-    let samples = sample_and_prune(field, rays, space, samples_per_ray, occupancy, rng);
+) -> Result<(VolumeOutput, SampleSet), TensorValuesError> {
+    let samples = sample_and_prune(field, rays, space, samples_per_ray, occupancy, rng)?;
     let out = render_samples(field, &samples, background);
-    (out, samples)
+    Ok((out, samples))
 }
 
 /// Camera-space normals `[R, 3]` from the density gradient (central finite differences with

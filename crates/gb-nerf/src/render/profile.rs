@@ -77,7 +77,7 @@ pub fn render_profiles(
     let field = field.valid();
     let mut out = Vec::with_capacity(pixels.len());
     for chunk in pixels.chunks(settings.chunk.max(1)) {
-        let (r, samples) = render_pixels(&field, camera, chunk, settings);
+        let (r, samples) = render_pixels(&field, camera, chunk, settings)?;
         let weights = f32_values(r.weights.into_data(), "ray weights")?;
         let depth = f32_values(r.depth.into_data(), "rendered depth")?;
         let opacity = f32_values(r.opacity.into_data(), "rendered opacity")?;

@@ -21,19 +21,23 @@
 //! on `alcove`, and was not kept.
 
 use burn::tensor::Tensor;
+use gb_core::TensorValuesError;
 
 use super::FIELD_CHUNK_SAMPLES;
 use crate::field::NerfField;
 use crate::sampler::SampleSet;
 
 /// The field's densities at `points`, in chunks, without a graph.
-fn densities(field: &NerfField, points: &[[f32; 3]]) -> Option<Vec<f32>> {
+fn densities(field: &NerfField, points: &[[f32; 3]]) -> Result<Vec<f32>, TensorValuesError> {
     let mut out = Vec::with_capacity(points.len());
     for chunk in points.chunks(FIELD_CHUNK_SAMPLES) {
         let sigma: Tensor<1> = field.density(chunk).detach();
-        out.extend(gb_core::read_f32(sigma, "densities").ok()?);
+        out.extend(gb_core::read_f32(
+            sigma,
+            "densities for early ray termination",
+        )?);
     }
-    Some(out)
+    Ok(out)
 }
 
 /// Which evaluated samples of `samples` remain once each ray stops at transmittance `eps`,
@@ -58,19 +62,20 @@ pub fn surviving(samples: &SampleSet, sigma: &[f32], eps: f32) -> Vec<bool> {
 }
 
 /// `samples` without the samples behind each ray's termination point (see the module
-/// docs). The samples are left as they are when `eps <= 0`, when their slots are not in
-/// ray-major order, or when the densities cannot be read back.
-pub fn prune_occluded(field: &NerfField, samples: SampleSet, eps: f32) -> SampleSet {
+/// docs). The samples are left as they are when `eps <= 0` or when their slots are not in
+/// ray-major order; densities that cannot be read back are the error.
+pub fn prune_occluded(
+    field: &NerfField,
+    samples: SampleSet,
+    eps: f32,
+) -> Result<SampleSet, TensorValuesError> {
     if eps <= 0.0 || samples.slots.is_empty() || !samples.slots.is_sorted() {
-        return samples;
+        return Ok(samples);
     }
-    let Some(sigma) = densities(field, &samples.points) else {
-        tracing::debug!("early ray termination skipped: densities unreadable");
-        return samples;
-    };
+    let sigma = densities(field, &samples.points)?;
     let keep = surviving(&samples, &sigma, eps);
     if keep.iter().all(|k| *k) {
-        return samples;
+        return Ok(samples);
     }
     let pick = |v: Vec<[f32; 3]>| -> Vec<[f32; 3]> {
         v.into_iter()
@@ -78,7 +83,7 @@ pub fn prune_occluded(field: &NerfField, samples: SampleSet, eps: f32) -> Sample
             .filter_map(|(x, k)| k.then_some(x))
             .collect()
     };
-    SampleSet {
+    Ok(SampleSet {
         slots: samples
             .slots
             .iter()
@@ -89,7 +94,7 @@ pub fn prune_occluded(field: &NerfField, samples: SampleSet, eps: f32) -> Sample
         world: pick(samples.world),
         view_dirs: pick(samples.view_dirs),
         ..samples
-    }
+    })
 }
 
 #[cfg(test)]

@@ -236,7 +236,8 @@ impl Trainer {
     /// The reconstruction loss of one batch of unmasked training rays (RGB MSE, plus
     /// `depth_weight` times the disparity loss where depth exists), with its autodiff graph.
     /// Draws from the trainer's random stream; [`Self::apply_loss`] completes the step.
-    pub fn reconstruction_loss(&mut self) -> ReconstructionLoss {
+    /// Errors when early ray termination cannot read the field's densities.
+    pub fn reconstruction_loss(&mut self) -> Result<ReconstructionLoss, NerfError> {
         let n = self.config.train.rays_per_batch;
         let (rays, rgb, disp, valid) = self.batch_rays(n);
         let device = self.field.device();
@@ -248,7 +249,7 @@ impl Trainer {
             self.occupancy.as_ref(),
             self.background,
             Some(&mut self.rng),
-        );
+        )?;
         let target = Tensor::<2>::from_data(TensorData::new(rgb, [n, 3]), &device);
         let rgb_loss = mse(out.rgb, target);
         let mut loss = rgb_loss.clone();
@@ -262,11 +263,11 @@ impl Trainer {
             let dl = disparity_loss(out.disparity, gt, valid, self.near);
             loss = loss + dl.mul_scalar(self.config.train.depth_weight);
         }
-        ReconstructionLoss {
+        Ok(ReconstructionLoss {
             loss,
             rgb_mse: rgb_loss.detach(),
             evaluations_per_ray: samples.evaluations_per_ray(),
-        }
+        })
     }
 
     /// Completes a step with `loss` (the reconstruction loss plus any extra terms): one
@@ -296,7 +297,7 @@ impl Trainer {
     /// one device read (loss and RGB MSE together), plus the occupancy grid's on its update
     /// steps.
     pub fn train_step(&mut self) -> Result<StepStats, NerfError> {
-        let r = self.reconstruction_loss();
+        let r = self.reconstruction_loss()?;
         let values = read_f32(
             Tensor::cat(vec![r.loss.clone().detach(), r.rgb_mse], 0),
             "loss and RGB MSE",
