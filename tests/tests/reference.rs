@@ -227,6 +227,62 @@ fn a_reference_pulls_its_view_to_the_clean_image_and_a_resumed_run_continues_exa
     );
 }
 
+/// `[reference] skip_observed`: from the same field (both runs are identical until the term
+/// starts at step 40), the carried set records which masked pixels of the reference another
+/// view observes (some are, some are not, on this scene), and what is carried is the plain
+/// run's carried pixels less those that come from observed reference pixels.
+#[test]
+fn skip_observed_leaves_out_the_reference_pixels_that_other_views_see() {
+    let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let (d, scene) = scene(dir.path());
+    let preset = small_preset(dir.path(), None);
+    let view = masked_view(&scene);
+    let pair = format!("{view}={}", s(&d.join("clean").join(format!("{view}.png"))));
+    let refs = load_references(&scene, std::slice::from_ref(&pair), 1).unwrap();
+    let base = |m: &mut MethodConfig| {
+        m.reference.images = vec![pair.clone()];
+        m.reference.start_step = 5000;
+        m.reference.refresh_every = 20;
+    };
+    // each trainer seeds the device and draws its MLP at its first step: both before the
+    // other trainer draws
+    let mut plain = trainer(&scene, &preset, refs.clone(), base);
+    let first = plain.train_step().unwrap();
+    let mut skip = trainer(&scene, &preset, refs.clone(), |m| {
+        base(m);
+        m.reference.skip_observed = true;
+    });
+    assert_eq!(skip.train_step().unwrap().loss, first.loss);
+    for _ in 1..41 {
+        let a = plain.train_step().unwrap();
+        let b = skip.train_step().unwrap();
+        if a.step < 40 {
+            assert_eq!(a.loss, b.loss, "step {}", a.step);
+        }
+    }
+    let all = plain.reference.as_ref().unwrap().carried.clone().unwrap();
+    let kept = skip.reference.as_ref().unwrap().carried.clone().unwrap();
+    assert_eq!((all.step, kept.step), (40, 40));
+    assert!(all.observed.is_empty());
+    assert_eq!(kept.observed.len(), 1);
+    assert_eq!(kept.observed[0].len(), refs[0].pixels.len());
+    let observed = kept.observed[0].iter().filter(|o| **o).count();
+    assert!(
+        observed > 0 && observed < refs[0].pixels.len(),
+        "{observed} of {} reference pixels observed",
+        refs[0].pixels.len()
+    );
+    assert!(!kept.pixels.is_empty(), "nothing carried");
+    assert!(
+        kept.pixels.len() < all.pixels.len(),
+        "{} carried with skip_observed, {} without",
+        kept.pixels.len(),
+        all.pixels.len()
+    );
+    assert!(kept.pixels.iter().all(|p| all.pixels.contains(p)));
+}
+
 /// `fill` with the fixture prior: the view at full size, every pixel outside its mask the
 /// input's, the masked ones changed; an unknown view and a view without a mask are errors
 /// naming `--view`; the command writes the PNG.

@@ -36,7 +36,9 @@
 //! (`cargo xtask fill`, its default settings, the prior's own LoRA) as the reference, which
 //! is what a user without a clean plate or a 2D tool runs.
 //! `--auto-reference` adds `reference-auto`: the same view filled by frequency-selective
-//! reconstruction, as `inpaint --reference auto` fills it, no weights.
+//! reconstruction, as `inpaint --reference auto` fills it, no weights; and
+//! `reference-auto-unseen`, the same with `[reference] skip_observed` (only the reference
+//! pixels that no other view observes are supervised and carried).
 
 use std::path::{Path, PathBuf};
 
@@ -79,8 +81,9 @@ pub struct Args {
     /// the grid's prior fills in 2D (`cargo xtask fill`).
     #[arg(long)]
     pub fill_reference: bool,
-    /// Add the row `reference-auto` (module docs): the `none` method with `--reference
-    /// auto`, the reference filled by frequency-selective reconstruction, no weights.
+    /// Add the rows `reference-auto` and `reference-auto-unseen` (module docs): the `none`
+    /// method with `--reference auto`, the reference filled by frequency-selective
+    /// reconstruction, no weights; the second only where no other view observes.
     #[arg(long)]
     pub auto_reference: bool,
 }
@@ -129,6 +132,10 @@ pub const REFERENCE_FILL: &str = "reference-fill";
 
 /// The name of the row of `--auto-reference`.
 pub const REFERENCE_AUTO: &str = "reference-auto";
+
+/// The name of the second row of `--auto-reference`: `reference-auto` with `[reference]
+/// skip_observed`.
+pub const REFERENCE_AUTO_UNSEEN: &str = "reference-auto-unseen";
 
 /// The middle masked training view of a generated scene: the reference view of the
 /// `reference-*` rows.
@@ -268,21 +275,32 @@ pub fn write_reference_fill(
     )
 }
 
-/// Writes `dir/reference-auto.toml` (module docs): the `none` method with the reference that
-/// `inpaint --reference auto` makes ([`gb_inpaint::fill::auto_reference`]: the middle masked
-/// training view filled by frequency-selective reconstruction), the fill saved beside it.
-pub fn write_reference_auto(scene_dir: &Path, dir: &Path) -> anyhow::Result<PathBuf> {
+/// Writes `dir/reference-auto.toml` and `dir/reference-auto-unseen.toml` (module docs): the
+/// `none` method with the reference that `inpaint --reference auto` makes
+/// ([`gb_inpaint::fill::auto_reference`]: the middle masked training view filled by
+/// frequency-selective reconstruction), the fill saved beside it; the second supervises and
+/// carries only the reference pixels that no other view observes (`[reference]
+/// skip_observed`).
+pub fn write_reference_auto(scene_dir: &Path, dir: &Path) -> anyhow::Result<[PathBuf; 2]> {
     let (_, scene) = gb_nerf::scene::load(scene_dir, &gb_nerf::scene::LoadOptions::default())?;
     let (_, auto) = gb_inpaint::fill::auto_reference(&scene, scene_dir, dir)?;
     let png = dir.join(format!("reference-auto-{}.png", auto.view));
-    write_reference_method(
+    let all = write_reference_method(
         dir,
         REFERENCE_AUTO,
         "no prior in the NeRF; one training view filled in 2D by frequency-selective \
          reconstruction (inpaint --reference auto, no weights) is the reference",
         &auto.view,
         &png,
-    )
+    )?;
+    let mut method = gb_inpaint::MethodConfig::load(all.to_str().context("a non-UTF-8 path")?)?;
+    method.name = REFERENCE_AUTO_UNSEEN.into();
+    method.description = format!(
+        "{}, on the pixels no other training view observes",
+        method.description
+    );
+    method.reference.skip_observed = true;
+    Ok([all, write_method(dir, &method)?])
 }
 
 /// For each row, whether it beats the `none` row on each column.
@@ -519,7 +537,7 @@ pub fn run_scene(
             )?);
         }
         if extra.auto {
-            extra_files.push(write_reference_auto(&scene_dir, &runs)?);
+            extra_files.extend(write_reference_auto(&scene_dir, &runs)?);
         }
         if !extra_files.is_empty() {
             let mut list = methods.unwrap_or_else(|| grid::grid_methods(None));
@@ -690,8 +708,12 @@ mod tests {
         };
         let generated = procedural::write(&opts, &scene_dir).unwrap();
         let view = reference_view(&generated).unwrap();
-        let path = write_reference_auto(&scene_dir, &dir.path().join("runs")).unwrap();
+        let [path, unseen] = write_reference_auto(&scene_dir, &dir.path().join("runs")).unwrap();
         let method = gb_inpaint::MethodConfig::load(path.to_str().unwrap()).unwrap();
+        let unseen = gb_inpaint::MethodConfig::load(unseen.to_str().unwrap()).unwrap();
+        assert_eq!(unseen.name, REFERENCE_AUTO_UNSEEN);
+        assert!(unseen.reference.skip_observed && !method.reference.skip_observed);
+        assert_eq!(unseen.reference.images, method.reference.images);
         assert_eq!(
             (method.name.as_str(), method.rgb.is_none()),
             (REFERENCE_AUTO, true)

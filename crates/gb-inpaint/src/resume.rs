@@ -285,6 +285,7 @@ mod tests {
                 }],
                 tested: 9,
                 anchors: vec![vec![1.5, 3.25]],
+                observed: vec![vec![true, false]],
             }),
         };
         let back: GuidedState =

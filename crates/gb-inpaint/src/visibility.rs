@@ -190,46 +190,15 @@ impl ObservedMap {
                 [0, 1, 2].map(|i| o[i] + depth[k] * d[i])
             })
             .collect();
-        // candidate (point, other view pixel) pairs: in the image, outside its mask; the
-        // depth each other view renders through its candidate pixels
-        let mut owner = Vec::new();
-        let mut expected = Vec::new();
-        let mut seen = Vec::new();
-        for (j, other) in views.iter().enumerate() {
-            if j == index {
-                continue;
-            }
-            let cam = &other.camera;
-            let mut px_list = Vec::new();
-            for (k, p) in points.iter().enumerate() {
-                let Some(([px, py], z)) = cam.project(*p) else {
-                    continue;
-                };
-                if !(px >= 0.0 && py >= 0.0 && px < cam.width as f32 && py < cam.height as f32) {
-                    continue;
-                }
-                let (x, y) = (px as usize, py as usize);
-                if !references.contains(&j)
-                    && other
-                        .mask
-                        .as_ref()
-                        .is_some_and(|m| m.data.get(y * m.width + x).copied().unwrap_or(true))
-                {
-                    continue;
-                }
-                px_list.push([px, py]);
-                owner.push(k);
-                expected.push(z);
-            }
-            let r = camera_rays(cam, &px_list, ctx.space, ctx.near, ctx.far);
-            seen.extend(render_depth(&field, ctx, &r)?);
-        }
-        let mut hit = vec![false; pixels.len()];
-        for ((k, z), d) in owner.iter().zip(&expected).zip(&seen) {
-            if (d - z).abs() <= cfg.depth_tolerance * z.abs().max(1e-6) {
-                hit[*k] = true;
-            }
-        }
+        let hit = observed_points(
+            &field,
+            ctx,
+            views,
+            &points,
+            &[index],
+            references,
+            cfg.depth_tolerance,
+        )?;
         let mut observed = vec![false; rv * rv];
         for (&i, h) in geometry.masked.iter().zip(&hit) {
             observed[i] = *h;
@@ -262,6 +231,66 @@ impl ObservedMap {
         }
         Tensor::from_data(TensorData::new(w, [1, 1, r, r]), device)
     }
+}
+
+/// Which of `points` a training view outside `skip` observes (module docs): the point
+/// lands inside that view's image, outside its mask (a view of `masked_observes` observes
+/// through its masked pixels too), and in front: the depth that `field` (a no-graph copy)
+/// renders through that pixel is within `tolerance` (relative) of the point's z-depth. A
+/// point that is not finite is observed by none.
+pub(crate) fn observed_points(
+    field: &NerfField,
+    ctx: &RenderContext<'_>,
+    views: &[TrainView],
+    points: &[[f32; 3]],
+    skip: &[usize],
+    masked_observes: &[usize],
+    tolerance: f32,
+) -> Result<Vec<bool>, TensorValuesError> {
+    // candidate (point, other view pixel) pairs: in the image, outside its mask; the depth
+    // each other view renders through its candidate pixels
+    let mut owner = Vec::new();
+    let mut expected = Vec::new();
+    let mut seen = Vec::new();
+    for (j, other) in views.iter().enumerate() {
+        if skip.contains(&j) {
+            continue;
+        }
+        let cam = &other.camera;
+        let mut px_list = Vec::new();
+        for (k, p) in points.iter().enumerate() {
+            if !p.iter().all(|c| c.is_finite()) {
+                continue;
+            }
+            let Some(([px, py], z)) = cam.project(*p) else {
+                continue;
+            };
+            if !(px >= 0.0 && py >= 0.0 && px < cam.width as f32 && py < cam.height as f32) {
+                continue;
+            }
+            let (x, y) = (px as usize, py as usize);
+            if !masked_observes.contains(&j)
+                && other
+                    .mask
+                    .as_ref()
+                    .is_some_and(|m| m.data.get(y * m.width + x).copied().unwrap_or(true))
+            {
+                continue;
+            }
+            px_list.push([px, py]);
+            owner.push(k);
+            expected.push(z);
+        }
+        let r = camera_rays(cam, &px_list, ctx.space, ctx.near, ctx.far);
+        seen.extend(render_depth(field, ctx, &r)?);
+    }
+    let mut hit = vec![false; points.len()];
+    for ((k, z), d) in owner.iter().zip(&expected).zip(&seen) {
+        if (d - z).abs() <= tolerance * z.abs().max(1e-6) {
+            hit[*k] = true;
+        }
+    }
+    Ok(hit)
 }
 
 /// The z-depth that `field` (a no-graph copy) renders along `rays`, in chunks.

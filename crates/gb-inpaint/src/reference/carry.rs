@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{ReferenceConfig, ReferenceView};
 use crate::crop::RenderContext;
-use crate::visibility::render_depth;
+use crate::visibility::{observed_points, render_depth};
 
 /// A masked pixel of a training view with the colour a reference gives it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -42,6 +42,22 @@ pub struct CarriedSet {
     /// first refresh on).
     #[serde(default)]
     pub anchors: Vec<Vec<f32>>,
+    /// Per reference view, whether another training view observes each of its masked pixels
+    /// (`[reference] skip_observed`; recomputed at every refresh): those pixels are neither
+    /// supervised nor carried. Empty when the setting is off.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub observed: Vec<Vec<bool>>,
+}
+
+impl CarriedSet {
+    /// Whether pixel `i` of reference `k` is observed by another view (module docs).
+    pub fn is_observed(&self, k: usize, i: usize) -> bool {
+        self.observed
+            .get(k)
+            .and_then(|o| o.get(i))
+            .copied()
+            .unwrap_or(false)
+    }
 }
 
 /// Masked pixels of `view` on a stride grid of at most `max` pixels (row-major).
@@ -116,6 +132,11 @@ pub fn carry(
             })
             .collect()
     });
+    let observed = if cfg.skip_observed {
+        observed_reference_pixels(ctx, &field, views, refs, &ref_depths, cfg.depth_tolerance)?
+    } else {
+        Vec::new()
+    };
     let mut tested = Vec::new();
     for (j, view) in views.iter().enumerate() {
         if !cfg.carry || refs.iter().any(|r| r.view == j) {
@@ -137,9 +158,53 @@ pub fn carry(
             depth,
         });
     }
-    let mut set = carry_from_depths(views, refs, &ref_depths, &tested, cfg.depth_tolerance, step);
+    let mut set = carry_from_depths(
+        views,
+        refs,
+        &ref_depths,
+        &observed,
+        &tested,
+        cfg.depth_tolerance,
+        step,
+    );
     set.anchors = anchors;
+    set.observed = observed;
     Ok(set)
+}
+
+/// For each reference, which of its masked pixels another training view observes: the
+/// pixel's surface point, at the depth `ref_depths` gives it, passes the visibility test of
+/// [`crate::visibility`] in some training view other than the references (their masked
+/// pixels hold a fill, not an observation). A pixel without a finite depth is not observed.
+pub fn observed_reference_pixels(
+    ctx: &RenderContext<'_>,
+    field: &gb_nerf::field::NerfField,
+    views: &[TrainView],
+    refs: &[ReferenceView],
+    ref_depths: &[Vec<f32>],
+    tolerance: f32,
+) -> Result<Vec<Vec<bool>>, TensorValuesError> {
+    // the references' masked pixels hold a fill, not an observation: no reference observes
+    let ref_views: Vec<usize> = refs.iter().map(|r| r.view).collect();
+    refs.iter()
+        .zip(ref_depths)
+        .map(|(r, map)| {
+            let cam = &views[r.view].camera;
+            let points: Vec<[f32; 3]> = r
+                .pixels
+                .iter()
+                .map(|[x, y]| {
+                    let d = map[*y as usize * cam.width + *x as usize];
+                    if d.is_finite() {
+                        cam.unproject(*x as f32 + 0.5, *y as f32 + 0.5, d)
+                    } else {
+                        [f32::NAN; 3]
+                    }
+                })
+                .collect();
+            observed_points(field, ctx, views, &points, &ref_views, &[], tolerance)
+        })
+        .collect()
 }
 
 /// The masked pixels of one view that the carrying tests, with the z-depth rendered
@@ -157,15 +222,33 @@ pub struct TestedView {
 /// The geometry of [`carry`] on given depths: each tested pixel's surface point is projected
 /// into each reference view (`ref_depths[k]`: the z-depth map, `width * height`, that
 /// reference `k` renders, NaN where unknown); the first reference whose mask it lands in,
-/// with a depth there within `tolerance` (relative) of the point's, gives its colour.
+/// with a depth there within `tolerance` (relative) of the point's, gives its colour, unless
+/// `observed[k]` (per masked pixel of reference `k`, in its `pixels` order; empty: none)
+/// marks that reference pixel as observed by another view.
 pub fn carry_from_depths(
     views: &[TrainView],
     refs: &[ReferenceView],
     ref_depths: &[Vec<f32>],
+    observed: &[Vec<bool>],
     tested: &[TestedView],
     tolerance: f32,
     step: usize,
 ) -> CarriedSet {
+    // each reference's observed pixels as a map of its image
+    let observed_maps: Vec<Vec<bool>> = refs
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            let w = views[r.view].camera.width;
+            let mut map = vec![false; w * views[r.view].camera.height];
+            if let Some(flags) = observed.get(k) {
+                for ([x, y], o) in r.pixels.iter().zip(flags) {
+                    map[*y as usize * w + *x as usize] = *o;
+                }
+            }
+            map
+        })
+        .collect();
     let mut pixels = Vec::new();
     let mut count = 0;
     for t in tested {
@@ -173,23 +256,27 @@ pub fn carry_from_depths(
         count += t.pixels.len();
         for ([x, y], d) in t.pixels.iter().zip(&t.depth) {
             let point = cam.unproject(*x as f32 + 0.5, *y as f32 + 0.5, *d);
-            let hit = refs.iter().zip(ref_depths).find_map(|(r, map)| {
-                let rv = &views[r.view];
-                let rc = &rv.camera;
-                let ([u, v], z) = rc.project(point)?;
-                if !(u >= 0.0 && v >= 0.0 && u < rc.width as f32 && v < rc.height as f32) {
-                    return None;
-                }
-                let (ui, vi) = (u as usize, v as usize);
-                let masked = rv
-                    .mask
-                    .as_ref()
-                    .is_some_and(|m| m.data.get(vi * m.width + ui).copied().unwrap_or(false));
-                let seen = map.get(vi * rc.width + ui).copied().unwrap_or(f32::NAN);
-                let in_front =
-                    seen.is_finite() && (seen - z).abs() <= tolerance * z.abs().max(1e-6);
-                (masked && in_front).then(|| r.image.get(ui, vi))
-            });
+            let hit =
+                refs.iter()
+                    .zip(ref_depths)
+                    .zip(&observed_maps)
+                    .find_map(|((r, map), obs)| {
+                        let rv = &views[r.view];
+                        let rc = &rv.camera;
+                        let ([u, v], z) = rc.project(point)?;
+                        if !(u >= 0.0 && v >= 0.0 && u < rc.width as f32 && v < rc.height as f32) {
+                            return None;
+                        }
+                        let (ui, vi) = (u as usize, v as usize);
+                        let masked = rv.mask.as_ref().is_some_and(|m| {
+                            m.data.get(vi * m.width + ui).copied().unwrap_or(false)
+                        });
+                        let seen = map.get(vi * rc.width + ui).copied().unwrap_or(f32::NAN);
+                        let in_front =
+                            seen.is_finite() && (seen - z).abs() <= tolerance * z.abs().max(1e-6);
+                        let observed = obs.get(vi * rc.width + ui).copied().unwrap_or(false);
+                        (masked && in_front && !observed).then(|| r.image.get(ui, vi))
+                    });
             if let Some(rgb) = hit {
                 pixels.push(CarriedPixel {
                     view: t.view as u32,
@@ -206,6 +293,7 @@ pub fn carry_from_depths(
         pixels,
         tested: count,
         anchors: Vec::new(),
+        observed: Vec::new(),
     }
 }
 
@@ -316,7 +404,7 @@ mod tests {
                 }
             })
             .collect();
-        let set = carry_from_depths(&views, &[reference], &[ref_depth], &tested, 0.05, 7);
+        let set = carry_from_depths(&views, &[reference], &[ref_depth], &[], &tested, 0.05, 7);
         assert_eq!((set.step, set.tested), (7, 2 * 16 * 12));
         // the left view: columns whose partner column x - 4 is in the box (8..24) and not
         // behind the reference's occluder (12, 13)
@@ -343,5 +431,43 @@ mod tests {
             assert!(p.x >= 12, "an occluded pixel was reached: {p:?}");
             assert_eq!(p.rgb[0], (p.x + 4) as f32 / 32.0, "{p:?}");
         }
+        // `skip_observed`: the reference's pixels left of column 16 are observed by another
+        // view, so nothing is carried from them; the rest is carried as before
+        let observed = vec![pixels.iter().map(|[x, _]| *x < 16).collect::<Vec<bool>>()];
+        let ref_depth = {
+            let mut d = vec![f32::NAN; 32 * 24];
+            for [x, y] in &pixels {
+                d[*y as usize * 32 + *x as usize] = if (12..14).contains(x) { 2.0 } else { 5.0 };
+            }
+            d
+        };
+        let reference = ReferenceView {
+            view: 1,
+            name: "middle".into(),
+            image: views[1].image.clone(),
+            pixels: pixels.clone(),
+        };
+        let skipped = carry_from_depths(
+            &views,
+            &[reference],
+            &[ref_depth],
+            &observed,
+            &tested,
+            0.05,
+            7,
+        );
+        let kept: Vec<&CarriedPixel> = set
+            .pixels
+            .iter()
+            .filter(|p| {
+                if p.view == 0 {
+                    p.x - 4 >= 16
+                } else {
+                    p.x + 4 >= 16
+                }
+            })
+            .collect();
+        assert!(!kept.is_empty() && kept.len() < set.pixels.len());
+        assert_eq!(skipped.pixels.iter().collect::<Vec<_>>(), kept);
     }
 }
