@@ -280,7 +280,25 @@ fn skip_observed_leaves_out_the_reference_pixels_that_other_views_see() {
         kept.pixels.len(),
         all.pixels.len()
     );
-    assert!(kept.pixels.iter().all(|p| all.pixels.contains(p)));
+    // each pixel of the plain set is kept exactly when the reference pixel it was carried
+    // from (its surface point projected into the reference view) is not observed
+    let rc = &plain.data.views[refs[0].view].camera;
+    for p in &all.pixels {
+        let cam = &plain.data.views[p.view as usize].camera;
+        let point = cam.unproject(p.x as f32 + 0.5, p.y as f32 + 0.5, p.depth);
+        let ([u, v], _) = rc.project(point).unwrap();
+        let source = refs[0]
+            .pixels
+            .iter()
+            .position(|q| *q == [u as u32, v as u32])
+            .unwrap();
+        assert_eq!(
+            kept.pixels.contains(p),
+            !kept.observed[0][source],
+            "{p:?} from reference pixel {:?}",
+            refs[0].pixels[source]
+        );
+    }
 }
 
 /// `fill` with the fixture prior: the view at full size, every pixel outside its mask the

@@ -3,7 +3,7 @@
 
 For a procedural scene (its `clean/NAME.png` is the view without the object, its
 `images_1/label/NAME.png` the object mask) and fills of that view written by
-`cargo xtask fill --view NAME [--lora ...] --out FILL.png`, prints and writes the masked PSNR
+`cargo xtask fill --with prior --view NAME [--lora ...] --out FILL.png`, prints and writes the masked PSNR
 of each fill and of a mean-colour fill (the unmasked pixels' mean):
 
     tools/diag/fill_vs_clean.py --scene SCENE --view view_016 \

@@ -117,20 +117,27 @@ impl Sizes {
 
 /// Runs the benchmark (see the module docs).
 pub fn run(args: Args) -> anyhow::Result<()> {
-    // a device that opens and is no card is refused before the setup; one that cannot open
-    // yet (no Vulkan loader before the setup installs it) is refused by the release run
+    // a CPU backend is refused at once; a wgpu adapter is checked by the process that
+    // measures (after the setup, which may install the Vulkan loader), so that this one holds
+    // no GPU context while the release run measures the card's memory
+    let cpu_backend = args.device != BackendKind::Wgpu;
+    if !args.smoke && !args.no_setup && !cpu_backend {
+        return setup_then_rerun(&args);
+    }
     let adapter = Adapter::open(args.device);
-    if !args.smoke && !adapter.is_card && (adapter.error.is_none() || args.no_setup) {
+    if !args.smoke && !adapter.is_card {
+        let cause = adapter
+            .error
+            .as_deref()
+            .map(|e| format!("; it did not open: {e}"))
+            .unwrap_or_default();
         bail!(
-            "--device {}: the adapter '{}' is no GPU card ({}): bench gpu would time a CPU. \
-             Run it on a GPU card, or add --smoke to check the command on any device",
+            "--device {}: the adapter '{}' is no GPU card ({}{cause}): bench gpu would time a \
+             CPU. Run it on a GPU card, or add --smoke to check the command on any device",
             args.device.name(),
             adapter.name,
             adapter.kind()
         );
-    }
-    if !args.smoke && !args.no_setup {
-        return setup_then_rerun(&args);
     }
     let sizes = Sizes::new(args.smoke)?;
     let gpu = GpuMemoryPoll::start();

@@ -106,7 +106,7 @@ pub struct ExtraRows {
     pub oracle: Vec<OracleRow>,
     /// `reference-fill` (`--fill-reference`).
     pub fill: bool,
-    /// `reference-auto` (`--auto-reference`).
+    /// `reference-auto` and `reference-auto-unseen` (`--auto-reference`).
     pub auto: bool,
 }
 

@@ -105,8 +105,9 @@ fn reference_depth(
 /// The pixels of every training view but the references' that a reference reaches through
 /// the field of `ctx` at `step` (module docs of [`crate::reference`]; none when
 /// `cfg.carry` is off), with the direct rays' depth anchors: `anchors` when given (those of
-/// the first refresh), else the depths rendered now. Errors when a rendered depth does not
-/// hold `f32` values.
+/// the first refresh), else the depths rendered now, and, with `cfg.skip_observed`, which
+/// reference pixels another view observes ([`observed_reference_pixels`]; nothing is carried
+/// from those). Errors when a rendered depth does not hold `f32` values.
 pub fn carry(
     ctx: &RenderContext<'_>,
     views: &[TrainView],
@@ -174,8 +175,9 @@ pub fn carry(
 
 /// For each reference, which of its masked pixels another training view observes: the
 /// pixel's surface point, at the depth `ref_depths` gives it, passes the visibility test of
-/// [`crate::visibility`] in some training view other than the references (their masked
-/// pixels hold a fill, not an observation). A pixel without a finite depth is not observed.
+/// [`crate::visibility`] in some other training view, outside that view's mask (so another
+/// reference's masked pixels, which hold a fill, do not observe). A pixel without a finite
+/// depth is not observed.
 pub fn observed_reference_pixels(
     ctx: &RenderContext<'_>,
     field: &gb_nerf::field::NerfField,
@@ -184,8 +186,6 @@ pub fn observed_reference_pixels(
     ref_depths: &[Vec<f32>],
     tolerance: f32,
 ) -> Result<Vec<Vec<bool>>, TensorValuesError> {
-    // the references' masked pixels hold a fill, not an observation: no reference observes
-    let ref_views: Vec<usize> = refs.iter().map(|r| r.view).collect();
     refs.iter()
         .zip(ref_depths)
         .map(|(r, map)| {
@@ -202,7 +202,7 @@ pub fn observed_reference_pixels(
                     }
                 })
                 .collect();
-            observed_points(field, ctx, views, &points, &ref_views, &[], tolerance)
+            observed_points(field, ctx, views, &points, &[r.view], &[], tolerance)
         })
         .collect()
 }

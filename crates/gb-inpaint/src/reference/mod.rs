@@ -370,6 +370,18 @@ pub fn load_references(
     Ok(out)
 }
 
+/// The pixels `(reference, index into its pixels)` that the direct rays draw from, in order:
+/// every masked pixel of every reference, less those that `set` marks as observed by another
+/// view (`skip_observed`).
+fn direct_pixels(views: &[ReferenceView], set: &CarriedSet) -> Vec<(usize, usize)> {
+    views
+        .iter()
+        .enumerate()
+        .flat_map(|(k, r)| (0..r.pixels.len()).map(move |i| (k, i)))
+        .filter(|&(k, i)| !set.is_observed(k, i))
+        .collect()
+}
+
 /// The references of a run and what was carried from them.
 #[derive(Debug, Clone)]
 pub struct ReferenceState {
@@ -436,14 +448,7 @@ impl ReferenceState {
         let Some(set) = self.carried.as_ref() else {
             return Ok(None);
         };
-        // the direct pixels (reference, pixel), less those another view observes
-        let direct_pixels: Vec<(usize, usize)> = self
-            .views
-            .iter()
-            .enumerate()
-            .flat_map(|(k, r)| (0..r.pixels.len()).map(move |i| (k, i)))
-            .filter(|&(k, i)| !set.is_observed(k, i))
-            .collect();
+        let direct_pixels = direct_pixels(&self.views, set);
         let direct = direct_pixels.len();
         let carried = set.pixels.len();
         if direct + carried == 0 || self.config.weight == 0.0 {
@@ -517,6 +522,28 @@ impl ReferenceState {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn direct_rays_draw_from_every_reference_pixel_less_the_observed_ones() {
+        let reference = |view: usize, n: u32| ReferenceView {
+            view,
+            name: format!("view_{view:03}"),
+            image: RgbImage::filled(4, 4, [0.0; 3]),
+            pixels: (0..n).map(|i| [i, 0]).collect(),
+        };
+        let views = [reference(1, 3), reference(5, 2)];
+        let mut set = CarriedSet {
+            step: 0,
+            pixels: Vec::new(),
+            tested: 0,
+            anchors: Vec::new(),
+            observed: Vec::new(),
+        };
+        let all = [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1)];
+        assert_eq!(direct_pixels(&views, &set), all);
+        set.observed = vec![vec![false, true, false], vec![true, false]];
+        assert_eq!(direct_pixels(&views, &set), [(0, 0), (0, 2), (1, 1)]);
+    }
 
     #[test]
     fn pairs_parse_at_the_first_equals_sign_and_bad_ones_name_the_flag() {
