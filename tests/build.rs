@@ -1,7 +1,9 @@
 //! Marks the tests that need the shared test data as ignored when it is missing: the check
 //! lives in gb-core's `testdata.rs`, compiled here as a module (see its docs). Marks the test
 //! of the Slurm array job (`grid_slurm.rs`) as ignored when the build sees no Slurm to test
-//! against: neither `SLURM_CONF` nor `GB_TEST_SLURM` (which `.ci/run` sets) is set.
+//! against: neither `SLURM_CONF` nor `GB_TEST_SLURM` (which `.ci/run` sets) is set; and the
+//! capture test (`capture.rs`) when no `colmap` runs and `GB_TEST_COLMAP` is not set (`.ci/run`
+//! installs COLMAP and sets it, so there a missing COLMAP fails).
 
 #[allow(dead_code)]
 #[path = "../crates/gb-core/src/testdata.rs"]
@@ -14,5 +16,16 @@ fn main() {
     println!("cargo::rerun-if-env-changed=GB_TEST_SLURM");
     if std::env::var_os("SLURM_CONF").is_none() && std::env::var_os("GB_TEST_SLURM").is_none() {
         println!("cargo::rustc-cfg=gb_no_slurm");
+    }
+    println!("cargo::rustc-check-cfg=cfg(gb_no_colmap)");
+    println!("cargo::rerun-if-env-changed=PATH");
+    println!("cargo::rerun-if-env-changed=GB_TEST_COLMAP");
+    let colmap = std::env::var_os("GB_TEST_COLMAP").is_some()
+        || std::process::Command::new("colmap")
+            .arg("help")
+            .output()
+            .is_ok_and(|o| o.status.success());
+    if !colmap {
+        println!("cargo::rustc-cfg=gb_no_colmap");
     }
 }

@@ -9,6 +9,7 @@ mod bad_input;
 mod bench_gpu;
 mod bench_pipeline;
 mod bench_trade;
+mod capture;
 mod cli;
 mod distill_cli;
 mod docs_links;

@@ -52,6 +52,8 @@ enum Command {
     Scene(cmd::scene::Args),
     /// Summarise a scene folder: views per split, resolution, masks, near/far, warnings.
     SceneInfo(cmd::scene_info::Args),
+    /// Your own photos to a scene: COLMAP poses (the object masked out) in the LLFF layout.
+    Capture(cmd::capture::Args),
 }
 
 /// Logs at `RUST_LOG` (default `info`) on stderr, through the writer that suspends the
@@ -137,6 +139,7 @@ fn main() {
         Command::Fuzz(a) => cmd::fuzz::run(a),
         Command::Scene(a) => cmd::scene::run(a),
         Command::SceneInfo(a) => cmd::scene_info::run(a),
+        Command::Capture(a) => cmd::capture::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {}", gb_core::messages::one_line(&format!("{e:#}")));

@@ -30,7 +30,7 @@ use gb_diffusion::distill::prior_input::bilinear_resize;
 use gb_diffusion::distill::{LatentEncoder, PriorInputMode};
 use gb_nerf::field::NerfField;
 use gb_nerf::render::image::NormalSource;
-use gb_nerf::render::rays::{all_pixels, camera_rays, crop_camera};
+use gb_nerf::render::rays::{all_pixels, camera_rays, crop_camera, crop_pixels};
 use gb_nerf::render::{
     density_gradient_normals, depth_to_normals, render_samples, render_samples_appearance_only,
     sample_and_prune, Background, Intrinsics, PlaneFitConfig,
@@ -69,7 +69,7 @@ impl CropGeometry {
         let (w, h) = (mask.width, mask.height);
         let r = resolution;
         let mut crop_mask = Vec::with_capacity(r * r);
-        for [px, py] in crop_positions(bbox, r) {
+        for [px, py] in crop_pixels(bbox, r, r) {
             let x = (px.floor() as usize).min(w - 1);
             let y = (py.floor() as usize).min(h - 1);
             crop_mask.push(mask.data[y * w + x]);
@@ -129,22 +129,6 @@ pub fn grown_bbox(mask: &Mask, margin: f32) -> Option<(usize, usize, usize, usiz
     Some((x0, y0, x1, y1))
 }
 
-/// Continuous pixel positions (pixel-centre convention) of the `r x r` crop of `bbox`.
-fn crop_positions(bbox: (usize, usize, usize, usize), r: usize) -> Vec<[f32; 2]> {
-    let (x0, y0, x1, y1) = bbox;
-    let (bw, bh) = ((x1 - x0) as f32, (y1 - y0) as f32);
-    let mut out = Vec::with_capacity(r * r);
-    for j in 0..r {
-        for i in 0..r {
-            out.push([
-                x0 as f32 + (i as f32 + 0.5) * bw / r as f32,
-                y0 as f32 + (j as f32 + 0.5) * bh / r as f32,
-            ]);
-        }
-    }
-    out
-}
-
 /// The bilinear samples (half-pixel centres, edge-clamped) of `image` at the crop's pixel
 /// positions, as a `[1, 3, R, R]` tensor on `device`.
 pub fn crop_image(
@@ -154,7 +138,7 @@ pub fn crop_image(
     device: &Device,
 ) -> Tensor<4> {
     let mut chw = vec![0.0f32; 3 * r * r];
-    for (k, [px, py]) in crop_positions(bbox, r).into_iter().enumerate() {
+    for (k, [px, py]) in crop_pixels(bbox, r, r).into_iter().enumerate() {
         let v = image.bilinear(px, py);
         for ch in 0..3 {
             chw[ch * r * r + k] = v[ch];

@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod ablate;
+pub mod capture;
 pub mod devices;
 pub mod distill_image;
 pub mod eval;

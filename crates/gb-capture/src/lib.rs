@@ -1,0 +1,143 @@
+//! `cargo xtask capture`: your own photos to a scene this project loads, in one command.
+//!
+//! 1. **Inputs.** `--images DIR` (png, jpg) and, optionally, `--masks DIR`: one mask per
+//!    image that shows the object, named after its image (`IMG_0001.jpg` -> `IMG_0001.png`),
+//!    white (non-zero) on the object. A mask that names no image is an error; an image
+//!    without a mask is a view without the object's mask.
+//! 2. **COLMAP** ([`colmap`]), on the CPU, each stage logged to `OUT/colmap/STAGE.log`:
+//!    feature extraction with one shared `SIMPLE_PINHOLE` camera (one focal length, the
+//!    principal point at the image centre: the intrinsics of the LLFF layout, so no
+//!    undistortion step is needed) and the object masked out (COLMAP's `mask_path`, black
+//!    where the object is), so the object's features do not drive the poses; exhaustive or
+//!    sequential matching; the mapper.
+//! 3. **The scene** ([`layout`]), the LLFF layout of `gb_nerf::scene::llff`: `images/` (the
+//!    registered images), `images/label/` (their masks, 0/255), `sparse/0/` (the model, whose
+//!    points become sparse depth) and `poses_bounds.npy` (camera-to-world poses in LLFF's
+//!    axes, `hwf`, and per image the 0.1 and 99.9 percentiles of its points' z-depth as near
+//!    and far, as LLFF's `imgs2poses.py` does).
+//!
+//! Images that COLMAP does not register are left out with a warning; fewer than half (or
+//! fewer than 3) registered is an error that says what to try.
+
+pub mod colmap;
+pub mod error;
+pub mod layout;
+
+use std::path::{Path, PathBuf};
+
+pub use error::CaptureError;
+
+/// How COLMAP matches features between images.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Matcher {
+    /// Every pair (a few hundred images at most).
+    #[default]
+    Exhaustive,
+    /// Neighbours in name order (a video's frames).
+    Sequential,
+}
+
+/// What [`capture`] needs.
+#[derive(Debug, Clone)]
+pub struct CaptureOptions {
+    /// The photos.
+    pub images: PathBuf,
+    /// The object masks, named after the images; `None`: no masks.
+    pub masks: Option<PathBuf>,
+    /// The scene folder to write.
+    pub out: PathBuf,
+    /// The matcher.
+    pub matcher: Matcher,
+    /// The COLMAP program.
+    pub colmap: PathBuf,
+}
+
+/// What [`capture`] made.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CaptureReport {
+    /// Images given.
+    pub images: usize,
+    /// Images registered (the scene's views).
+    pub registered: usize,
+    /// Views with a mask.
+    pub masked: usize,
+    /// 3D points of the model.
+    pub points: usize,
+    /// Images left out (not registered).
+    pub left_out: Vec<String>,
+}
+
+/// The image files of `dir` (png, jpg, jpeg), sorted by name.
+pub fn image_files(dir: &Path) -> Result<Vec<PathBuf>, CaptureError> {
+    let entries = std::fs::read_dir(dir).map_err(|e| CaptureError::io(dir, e))?;
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file())
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg"))
+        })
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+/// The file stem of `path`.
+pub(crate) fn stem(path: &Path) -> String {
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// For each image, its mask in `masks` (same stem, any image extension); an error lists the
+/// masks that match no image.
+pub fn pair_masks(images: &[PathBuf], masks: &Path) -> Result<Vec<Option<PathBuf>>, CaptureError> {
+    let files = image_files(masks)?;
+    let stems: Vec<String> = images.iter().map(|p| stem(p)).collect();
+    let unmatched: Vec<String> = files
+        .iter()
+        .filter(|m| !stems.contains(&stem(m)))
+        .map(|m| {
+            m.file_name()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .into_owned()
+        })
+        .take(8)
+        .collect();
+    if !unmatched.is_empty() {
+        return Err(CaptureError::MaskNames {
+            dir: masks.to_path_buf(),
+            names: unmatched,
+        });
+    }
+    Ok(stems
+        .iter()
+        .map(|s| files.iter().find(|m| stem(m) == *s).cloned())
+        .collect())
+}
+
+/// Runs the capture (module docs); `progress` is told each stage as it starts.
+pub fn capture(
+    opts: &CaptureOptions,
+    mut progress: impl FnMut(&str),
+) -> Result<CaptureReport, CaptureError> {
+    let images = image_files(&opts.images)?;
+    if images.len() < 3 {
+        return Err(CaptureError::TooFewImages {
+            dir: opts.images.clone(),
+            found: images.len(),
+        });
+    }
+    let masks = match &opts.masks {
+        Some(dir) => pair_masks(&images, dir)?,
+        None => vec![None; images.len()],
+    };
+    colmap::check_program(&opts.colmap)?;
+    let work = opts.out.join("colmap");
+    std::fs::create_dir_all(&work).map_err(|e| CaptureError::io(&work, e))?;
+    let model = colmap::reconstruct(opts, &images, &masks, &work, &mut progress)?;
+    progress("writing the scene");
+    layout::write_scene(&opts.out, &images, &masks, &model)
+}
