@@ -96,6 +96,24 @@ fn reference_errors_name_the_flag_and_the_file() {
     );
 }
 
+/// The small scene in `dir`, its preset, its masked view and that view's exact reference
+/// (from `clean/`) as a `VIEW=IMAGE` pair and loaded.
+fn clean_reference(dir: &Path) -> (PathBuf, Scene, PathBuf, String, String, Vec<ReferenceView>) {
+    let (d, scene) = scene(dir);
+    let preset = small_preset(dir, None);
+    let view = masked_view(&scene);
+    let pair = format!("{view}={}", s(&d.join("clean").join(format!("{view}.png"))));
+    let refs = load_references(&scene, std::slice::from_ref(&pair), 1).unwrap();
+    (d, scene, preset, view, pair, refs)
+}
+
+/// The reference `pair`, carried from step 40 of an 80-step run, refreshed every 20 steps.
+fn carry_from_step_40(m: &mut MethodConfig, pair: &str) {
+    m.reference.images = vec![pair.to_string()];
+    m.reference.start_step = 5000;
+    m.reference.refresh_every = 20;
+}
+
 /// A `none` trainer with the reference settings of `tune`.
 fn trainer(
     scene: &Scene,
@@ -134,17 +152,8 @@ fn a_reference_pulls_its_view_to_the_clean_image_and_a_resumed_run_continues_exa
     // trains in-process from the seeded device RNG (crate::DEVICE_RNG)
     let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
-    let (d, scene) = scene(dir.path());
-    let preset = small_preset(dir.path(), None);
-    let view = masked_view(&scene);
-    let pair = format!("{view}={}", s(&d.join("clean").join(format!("{view}.png"))));
-    let refs = load_references(&scene, std::slice::from_ref(&pair), 1).unwrap();
-    let tune = |m: &mut MethodConfig| {
-        m.reference.images = vec![pair.clone()];
-        // carrying from step 40 of 80, refreshed every 20 steps
-        m.reference.start_step = 5000;
-        m.reference.refresh_every = 20;
-    };
+    let (d, scene, preset, view, pair, refs) = clean_reference(dir.path());
+    let tune = |m: &mut MethodConfig| carry_from_step_40(m, &pair);
     let mut plain = trainer(&scene, &preset, Vec::new(), tune);
     let mut with = trainer(&scene, &preset, refs.clone(), tune);
     for _ in 0..50 {
@@ -235,16 +244,8 @@ fn a_reference_pulls_its_view_to_the_clean_image_and_a_resumed_run_continues_exa
 fn skip_observed_leaves_out_the_reference_pixels_that_other_views_see() {
     let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
-    let (d, scene) = scene(dir.path());
-    let preset = small_preset(dir.path(), None);
-    let view = masked_view(&scene);
-    let pair = format!("{view}={}", s(&d.join("clean").join(format!("{view}.png"))));
-    let refs = load_references(&scene, std::slice::from_ref(&pair), 1).unwrap();
-    let base = |m: &mut MethodConfig| {
-        m.reference.images = vec![pair.clone()];
-        m.reference.start_step = 5000;
-        m.reference.refresh_every = 20;
-    };
+    let (_, scene, preset, _, pair, refs) = clean_reference(dir.path());
+    let base = |m: &mut MethodConfig| carry_from_step_40(m, &pair);
     // each trainer seeds the device and draws its MLP at its first step: both before the
     // other trainer draws
     let mut plain = trainer(&scene, &preset, refs.clone(), base);
