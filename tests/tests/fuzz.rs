@@ -59,6 +59,8 @@ reader_tests! {
     safetensors_checkpoint => "safetensors/checkpoint",
     safetensors_lora_file => "safetensors/lora-file",
     lora_keys => "lora/keys",
+    colmap_binary => "colmap/binary",
+    colmap_text => "colmap/text",
     json_transforms => "json/transforms",
     toml_nerf_config => "toml/nerf-config",
     toml_method => "toml/method",

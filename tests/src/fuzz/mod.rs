@@ -9,6 +9,7 @@
 
 mod brisque;
 mod checkpoint;
+mod colmap;
 mod lora;
 pub mod mutate;
 mod npy;
@@ -164,6 +165,16 @@ pub fn readers() -> Vec<Reader> {
             name: "lora/keys",
             entry_point: "gb_diffusion::lora::LoraFile::read (key parser, adapter metadata)",
             property: lora::keys,
+        },
+        Reader {
+            name: "colmap/binary",
+            entry_point: "gb_nerf::scene::colmap::Model::read (cameras.bin, images.bin, points3D.bin)",
+            property: colmap::binary,
+        },
+        Reader {
+            name: "colmap/text",
+            entry_point: "gb_nerf::scene::colmap::Model::read (cameras.txt, images.txt, points3D.txt)",
+            property: colmap::text,
         },
         Reader {
             name: "json/transforms",
