@@ -36,9 +36,10 @@
 //! (`cargo xtask fill`, its default settings, the prior's own LoRA) as the reference, which
 //! is what a user without a clean plate or a 2D tool runs.
 //! `--auto-reference` adds `reference-auto`: the same view filled by frequency-selective
-//! reconstruction, as `inpaint --reference auto` fills it, no weights; and
-//! `reference-auto-unseen`, the same with `[reference] skip_observed` (only the reference
-//! pixels that no other view observes are supervised and carried).
+//! reconstruction, as `inpaint --reference auto` fills it, no weights;
+//! `--auto-reference-unseen` adds `reference-auto-unseen`, the same with `[reference]
+//! skip_observed` (only the reference pixels that no other view observes are supervised and
+//! carried).
 
 use std::path::{Path, PathBuf};
 
@@ -81,11 +82,14 @@ pub struct Args {
     /// the grid's prior fills in 2D (`cargo xtask fill`).
     #[arg(long)]
     pub fill_reference: bool,
-    /// Add the rows `reference-auto` and `reference-auto-unseen` (module docs): the `none`
-    /// method with `--reference auto`, the reference filled by frequency-selective
-    /// reconstruction, no weights; the second only where no other view observes.
+    /// Add the row `reference-auto` (module docs): the `none` method with `--reference auto`,
+    /// the reference filled by frequency-selective reconstruction, no weights.
     #[arg(long)]
     pub auto_reference: bool,
+    /// Add the row `reference-auto-unseen` (module docs): `reference-auto` with `[reference]
+    /// skip_observed`, supervised only where no other view observes.
+    #[arg(long)]
+    pub auto_reference_unseen: bool,
 }
 
 /// An oracle row of `bench quality --oracle` (module docs).
@@ -106,8 +110,10 @@ pub struct ExtraRows {
     pub oracle: Vec<OracleRow>,
     /// `reference-fill` (`--fill-reference`).
     pub fill: bool,
-    /// `reference-auto` and `reference-auto-unseen` (`--auto-reference`).
+    /// `reference-auto` (`--auto-reference`).
     pub auto: bool,
+    /// `reference-auto-unseen` (`--auto-reference-unseen`).
+    pub auto_unseen: bool,
 }
 
 /// The name of the oracle row of `--oracle`.
@@ -463,6 +469,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 oracle: args.oracle.clone().unwrap_or_default(),
                 fill: args.fill_reference,
                 auto: args.auto_reference,
+                auto_unseen: args.auto_reference_unseen,
             },
         )?;
         let path = args.out.join(format!("quality-{name}-{stamp}.json"));
@@ -536,8 +543,14 @@ pub fn run_scene(
                 &generated, &scene_dir, &runs, &prior, device,
             )?);
         }
-        if extra.auto {
-            extra_files.extend(write_reference_auto(&scene_dir, &runs)?);
+        if extra.auto || extra.auto_unseen {
+            let [all, unseen] = write_reference_auto(&scene_dir, &runs)?;
+            if extra.auto {
+                extra_files.push(all);
+            }
+            if extra.auto_unseen {
+                extra_files.push(unseen);
+            }
         }
         if !extra_files.is_empty() {
             let mut list = methods.unwrap_or_else(|| grid::grid_methods(None));

@@ -131,6 +131,17 @@ pub fn reconstruct(
     if masked > 0 {
         args.extend(["--ImageReader.mask_path", &fm]);
     }
+    // a known focal length: SIMPLE_PINHOLE's f, cx, cy with the centre of the first image
+    let params = match opts.focal {
+        Some(f) => {
+            let (w, h) = image_size(&images[0])?;
+            Some(format!("{f},{},{}", w as f64 / 2.0, h as f64 / 2.0))
+        }
+        None => None,
+    };
+    if let Some(p) = &params {
+        args.extend(["--ImageReader.camera_params", p]);
+    }
     run(&opts.colmap, "feature_extractor", &args, work)?;
     progress("COLMAP matching");
     let matcher = match opts.matcher {
@@ -160,6 +171,8 @@ pub fn reconstruct(
             &images_s,
             "--output_path",
             &sparse_s,
+            "--Mapper.ba_refine_focal_length",
+            if opts.focal.is_some() { "0" } else { "1" },
         ],
         work,
     )?;

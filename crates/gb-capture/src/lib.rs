@@ -50,6 +50,9 @@ pub struct CaptureOptions {
     pub matcher: Matcher,
     /// The COLMAP program.
     pub colmap: PathBuf,
+    /// The focal length in pixels when it is known (a calibrated camera): COLMAP then keeps it
+    /// fixed instead of estimating it, which also steadies the poses of small captures.
+    pub focal: Option<f64>,
 }
 
 /// What [`capture`] made.

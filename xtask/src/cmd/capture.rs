@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! cargo xtask capture --images DIR [--masks DIR] --out SCENE [--matcher exhaustive|sequential]
-//!     [--colmap PATH]
+//!     [--colmap PATH] [--focal PX]
 //! ```
 
 use std::path::PathBuf;
@@ -29,6 +29,10 @@ pub struct Args {
     /// The COLMAP program.
     #[arg(long, default_value = "colmap")]
     colmap: PathBuf,
+    /// The focal length in pixels, when known (a calibrated camera): kept fixed instead of
+    /// estimated.
+    #[arg(long)]
+    focal: Option<f64>,
 }
 
 /// `--matcher`.
@@ -49,6 +53,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             MatcherArg::Sequential => Matcher::Sequential,
         },
         colmap: args.colmap,
+        focal: args.focal,
     };
     let report = capture(&opts, |stage| tracing::info!("capture: {stage}"))?;
     println!(
