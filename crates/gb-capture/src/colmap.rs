@@ -49,10 +49,7 @@ fn write_feature_masks(
             .iter()
             .map(|&v| if v > 0.0 { 0.0 } else { 1.0 })
             .collect();
-        let name = format!(
-            "{}.png",
-            image.file_name().unwrap_or_default().to_string_lossy()
-        );
+        let name = format!("{}.png", crate::file_name(image));
         gb_core::write_gray_png(&dir.join(name), w, h, &keep)?;
         written += 1;
     }
@@ -179,9 +176,10 @@ pub fn reconstruct(
     // the mapper writes one model per connected component: 0, 1, ...
     let mut best: Option<Model> = None;
     let entries = std::fs::read_dir(&sparse).map_err(|e| CaptureError::io(&sparse, e))?;
-    for entry in entries.filter_map(|e| e.ok()) {
-        if entry.path().is_dir() {
-            let model = Model::read(&entry.path())?;
+    for entry in entries {
+        let path = entry.map_err(|e| CaptureError::io(&sparse, e))?.path();
+        if path.is_dir() {
+            let model = Model::read(&path)?;
             if best
                 .as_ref()
                 .is_none_or(|b| model.images.len() > b.images.len())
@@ -190,17 +188,13 @@ pub fn reconstruct(
             }
         }
     }
+    // no model at all: nothing registered, which the check below reports
     let model = best.unwrap_or_default();
     let names: Vec<String> = model.images.values().map(|i| i.name.clone()).collect();
     let total = images.len();
     let unregistered: Vec<String> = images
         .iter()
-        .map(|p| {
-            p.file_name()
-                .unwrap_or_default()
-                .to_string_lossy()
-                .into_owned()
-        })
+        .map(|p| crate::file_name(p))
         .filter(|n| !names.contains(n))
         .collect();
     let registered = total - unregistered.len();

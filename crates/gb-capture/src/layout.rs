@@ -75,11 +75,7 @@ pub fn write_scene(
         left_out: Vec::new(),
     };
     for (path, mask) in images.iter().zip(masks) {
-        let name = path
-            .file_name()
-            .unwrap_or_default()
-            .to_string_lossy()
-            .into_owned();
+        let name = crate::file_name(path);
         let Some(image) = by_name(&name) else {
             report.left_out.push(name);
             continue;
@@ -101,7 +97,7 @@ pub fn write_scene(
                 .iter()
                 .map(|&v| if v > 0.0 { 1.0 } else { 0.0 })
                 .collect();
-            let dst = label_dir.join(format!("{}.png", crate::stem(path)));
+            let dst = label_dir.join(format!("{}.png", gb_nerf::scene::files::stem(path)));
             gb_core::write_gray_png(&dst, w, h, &bits)?;
             report.masked += 1;
         }

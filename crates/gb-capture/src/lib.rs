@@ -26,6 +26,7 @@ pub mod layout;
 use std::path::{Path, PathBuf};
 
 pub use error::CaptureError;
+use gb_nerf::scene::files::{list_images, stem};
 
 /// How COLMAP matches features between images.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -70,43 +71,23 @@ pub struct CaptureReport {
     pub left_out: Vec<String>,
 }
 
-/// The image files of `dir` (png, jpg, jpeg), sorted by name.
-pub fn image_files(dir: &Path) -> Result<Vec<PathBuf>, CaptureError> {
-    let entries = std::fs::read_dir(dir).map_err(|e| CaptureError::io(dir, e))?;
-    let mut files: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file())
-        .filter(|p| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg"))
-        })
-        .collect();
-    files.sort();
-    Ok(files)
-}
-
-/// The file stem of `path`.
-pub(crate) fn stem(path: &Path) -> String {
-    path.file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default()
+/// The file name of `path` (lossy), for messages and COLMAP's image names. Every path here
+/// comes from [`list_images`], which lists files only, so each has a name.
+pub(crate) fn file_name(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| path.display().to_string())
 }
 
 /// For each image, its mask in `masks` (same stem, any image extension); an error lists the
 /// masks that match no image.
 pub fn pair_masks(images: &[PathBuf], masks: &Path) -> Result<Vec<Option<PathBuf>>, CaptureError> {
-    let files = image_files(masks)?;
+    let files = list_images(masks)?;
     let stems: Vec<String> = images.iter().map(|p| stem(p)).collect();
     let unmatched: Vec<String> = files
         .iter()
         .filter(|m| !stems.contains(&stem(m)))
-        .map(|m| {
-            m.file_name()
-                .unwrap_or_default()
-                .to_string_lossy()
-                .into_owned()
-        })
+        .map(|m| file_name(m))
         .take(8)
         .collect();
     if !unmatched.is_empty() {
@@ -126,7 +107,7 @@ pub fn capture(
     opts: &CaptureOptions,
     mut progress: impl FnMut(&str),
 ) -> Result<CaptureReport, CaptureError> {
-    let images = image_files(&opts.images)?;
+    let images = list_images(&opts.images)?;
     if images.len() < 3 {
         return Err(CaptureError::TooFewImages {
             dir: opts.images.clone(),
