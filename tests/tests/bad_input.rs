@@ -736,6 +736,13 @@ fn cases() -> Vec<(&'static str, Setup)> {
                 &["--baseline", "baseline.png", "not a folder"],
             )
         }),
+        case("export --run of a folder that is no run", |c| {
+            let s = c.scene();
+            run(
+                strings(&["export", "--run", path_str(&s)]),
+                &["--run", "config.toml is missing"],
+            )
+        }),
         case("a missing prior folder", |c| {
             let s = c.scene();
             let prior = c.path("no_prior");

@@ -14,6 +14,7 @@ mod cli;
 mod distill_cli;
 mod docs_links;
 mod eval;
+mod export_run;
 mod finetune_cli;
 mod fuzz;
 mod geometry;

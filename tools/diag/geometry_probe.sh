@@ -1,10 +1,16 @@
 #!/usr/bin/env bash
-# Issue 49's diagnosis: none, reference-oracle and score-oracle on tuning seed 100 of one
-# scene (fast preset, sparse depth), each run with --probe; the quality report lands in
-# bench/results/geometry-seed-100/, the runs in out/issue49/.
-# Usage: tools/diag/geometry_probe.sh SCENE
+# Issue 49's diagnosis and its measurement: none, reference-oracle and score-oracle on one
+# scene and seed (fast preset, sparse depth; the seed defaults to tuning seed 100), each run
+# with --probe; the quality report lands in bench/results/geometry-seed-SEED/, the runs in
+# out/issue49/ (finished runs are reused). GB_NERF names the binary to run (default: cargo
+# xtask), so that a long run is not rebuilt from a tree being edited.
+# Usage: [GB_NERF=/path/to/gb-nerf] tools/diag/geometry_probe.sh SCENE [SEED]
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-scene="$1"
-cargo xtask bench quality --scenes "$scene" --seeds 100 --methods none \
-    --oracle reference,score --probe --work out/issue49 --out bench/results/geometry-seed-100
+# the build the README commands and CI share (.ci/run)
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/gb-nerf-rs/target}"
+scene="$1" seed="${2:-100}"
+if [ -n "${GB_NERF:-}" ]; then run=("$GB_NERF"); else run=(cargo xtask); fi
+"${run[@]}" bench quality --scenes "$scene" --seeds "$seed" --methods none \
+    --oracle reference,score --probe --work out/issue49 \
+    --out "bench/results/geometry-seed-$seed" --reuse-finished

@@ -48,12 +48,14 @@ enum Command {
     Bench(gb_bench::Args),
     /// Property tests of every file reader (10 000 cases each), report in bench/results.
     Fuzz(cmd::fuzz::Args),
-    /// Generate a procedural object-removal scene (stairs, fence, alcove) in the SPIn-NeRF layout.
+    /// Generate a procedural object-removal scene (stairs, fence, alcove, wall), SPIn-NeRF layout.
     Scene(cmd::scene::Args),
     /// Summarise a scene folder: views per split, resolution, masks, near/far, warnings.
     SceneInfo(cmd::scene_info::Args),
     /// Your own photos to a scene: COLMAP poses (the object masked out) in the LLFF layout.
     Capture(cmd::capture::Args),
+    /// The nerfstudio export of a finished run, from its checkpoint (no training).
+    Export(cmd::export::Args),
 }
 
 /// Logs at `RUST_LOG` (default `info`) on stderr, through the writer that suspends the
@@ -140,6 +142,7 @@ fn main() {
         Command::Scene(a) => cmd::scene::run(a),
         Command::SceneInfo(a) => cmd::scene_info::run(a),
         Command::Capture(a) => cmd::capture::run(a),
+        Command::Export(a) => cmd::export::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {}", gb_core::messages::one_line(&format!("{e:#}")));

@@ -53,10 +53,11 @@ use crate::GuidedTrainer;
 #[serde(rename_all = "lowercase")]
 pub enum ExportMode {
     /// `OUT/export/`: every training view rendered, its depth, the cameras and the orbit.
-    #[default]
     Full,
-    /// No export (the benchmarks: it costs about as much as the test renders and the
-    /// metrics together).
+    /// No export (the default: it renders every training view, which on a real capture costs
+    /// as much as the training on a CPU; `cargo xtask export --run OUT` writes it later from
+    /// the run's checkpoint, [`crate::run::export_run`]).
+    #[default]
     None,
 }
 

@@ -44,8 +44,9 @@
 //!   `eval` every gb-eval metric that applies (`gb_inpaint::metrics`: PSNR / SSIM full, bbox
 //!   and mask, ST-LPIPS with the weights of `--weights` or `$GB_TEST_DATA/weights`, D-PSNR,
 //!   FID / D-FID from 8 test views, BRISQUE, NIMA), with the reason of each unavailable one;
-//! - `export/`: the inpainted training views (RGB, 16-bit depth), `transforms.json` and the
-//!   orbit's `camera_path.json` for nerfstudio (`gb_inpaint::export`);
+//! - `export/` (only with `--export full`; `cargo xtask export --run OUT` writes it later from
+//!   the checkpoint): the inpainted training views (RGB, 16-bit depth), `transforms.json` and
+//!   the orbit's `camera_path.json` for nerfstudio (`gb_inpaint::export`);
 //! - `orbit.gif`: the trained field along a closed path through the input cameras, at half
 //!   the training resolution (`--orbit-frames`, default 24; 0 for none; `gb_inpaint::gif`);
 //! - `probe/` (only with `--probe`): per test view, the mask box's render, truth,
@@ -130,9 +131,10 @@ pub struct Args {
     #[arg(long = "reference", value_name = "VIEW=IMAGE|auto")]
     pub references: Vec<String>,
     /// The nerfstudio export of the inpainted scene, `OUT/export/`: full (every training view
-    /// rendered, with depth and cameras) or none (on a real capture it takes about as long as
-    /// the training on a CPU).
-    #[arg(long, default_value = "full", value_name = "full|none")]
+    /// rendered, with depth and cameras) or none, the default (on a real capture it takes
+    /// about as long as the training on a CPU; `cargo xtask export --run OUT` writes it later
+    /// from the checkpoint).
+    #[arg(long, default_value = "none", value_name = "full|none")]
     pub export: gb_inpaint::export::ExportMode,
     /// Another run's output folder (or its `renders/`): its test-view renders are the
     /// baseline column of `report.html` (default: the masked input, said so on the page).
@@ -196,5 +198,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.out.join("metrics.json").display(),
         args.out.join(&summary.report).display()
     );
+    if summary.export.is_none() {
+        println!(
+            "for nerfstudio: cargo xtask export --run {}",
+            args.out.display()
+        );
+    }
     Ok(())
 }

@@ -5,6 +5,7 @@ pub mod capture;
 pub mod devices;
 pub mod distill_image;
 pub mod eval;
+pub mod export;
 pub mod fill;
 pub mod finetune;
 pub mod fuzz;

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 /// Arguments of `cargo xtask scene`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scene: stairs, fence or alcove.
+    /// Scene: stairs, fence, alcove or wall.
     #[arg(long)]
     name: SceneName,
     /// Output folder (absent, empty, or an earlier generated scene).

@@ -56,12 +56,16 @@ pub struct GridSettings {
     /// Frames of each run's orbit animation.
     pub orbit_frames: usize,
     /// Whether each run writes the nerfstudio export (absent in grids from before the
-    /// setting: full).
-    #[serde(default, skip_serializing_if = "is_full_export")]
+    /// setting, when runs exported by default: full).
+    #[serde(default = "full_export", skip_serializing_if = "is_full_export")]
     pub export: crate::export::ExportMode,
     /// Whether each run writes `probe/` ([`crate::run::probe`]; absent: no).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub probe: bool,
+}
+
+fn full_export() -> crate::export::ExportMode {
+    crate::export::ExportMode::Full
 }
 
 fn is_full_export(m: &crate::export::ExportMode) -> bool {

@@ -11,6 +11,7 @@
 //! (nerfstudio), `orbit.gif` and `report.html`.
 
 mod config_file;
+mod export_run;
 pub mod probe;
 mod setup;
 pub mod summary;
@@ -25,9 +26,10 @@ use gb_eval::suite::{evaluate, PairSet, SuiteOptions};
 use gb_nerf::train::DepthSupervision;
 
 pub use config_file::shell_quote;
+pub use export_run::export_run;
 pub use setup::{load_method, load_preset, method_and_prior, DEFAULT_METHOD};
 pub use summary::{GuidanceSummary, MeanMetrics, OrbitSummary, RunSummary, ViewMetrics, NOTES};
-pub use test_views::disparity_map;
+pub use test_views::{disparity_map, render_test_views, TestViews};
 
 use crate::error::InpaintError;
 use crate::method::{PromptOverrides, SceneCaptions};
@@ -113,7 +115,7 @@ impl Default for RunSpec {
             baseline: None,
             weights: None,
             orbit_frames: 24,
-            export: crate::export::ExportMode::Full,
+            export: crate::export::ExportMode::None,
             probe: false,
             progress: false,
             program: "gb-nerf".into(),

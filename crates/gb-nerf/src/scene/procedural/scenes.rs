@@ -1,7 +1,8 @@
 //! The built-in scenes: `stairs` (a textured staircase with an object standing on a step),
 //! `fence` (a periodic picket fence in front of a brick wall, with an object in front) and
 //! `alcove` (an object standing in a recess of a wall, so that most of what it hides, the
-//! recess's tiled back, is seen by no view).
+//! recess's tiled back, is seen by no view) and `wall` (an object standing in front of a flat
+//! brick wall: the hidden surface is one plane, partly seen by the other views).
 //! World axes: y up; the cameras look roughly along -z. Units: metres, loosely.
 
 use super::geometry::{Geometry, V3};
@@ -19,11 +20,18 @@ pub enum SceneName {
     Fence,
     /// A plastered wall with a recess, an object (a vase) standing in it.
     Alcove,
+    /// A flat brick wall with an object (a vase) standing in front of it.
+    Wall,
 }
 
 impl SceneName {
     /// Every scene.
-    pub const ALL: [SceneName; 3] = [SceneName::Stairs, SceneName::Fence, SceneName::Alcove];
+    pub const ALL: [SceneName; 4] = [
+        SceneName::Stairs,
+        SceneName::Fence,
+        SceneName::Alcove,
+        SceneName::Wall,
+    ];
 
     /// Its command-line name.
     pub fn as_str(&self) -> &'static str {
@@ -31,6 +39,7 @@ impl SceneName {
             SceneName::Stairs => "stairs",
             SceneName::Fence => "fence",
             SceneName::Alcove => "alcove",
+            SceneName::Wall => "wall",
         }
     }
 }
@@ -48,8 +57,9 @@ impl std::str::FromStr for SceneName {
             "stairs" => Ok(SceneName::Stairs),
             "fence" => Ok(SceneName::Fence),
             "alcove" => Ok(SceneName::Alcove),
+            "wall" => Ok(SceneName::Wall),
             other => Err(format!(
-                "unknown procedural scene '{other}' (expected stairs, fence or alcove)"
+                "unknown procedural scene '{other}' (expected stairs, fence, alcove or wall)"
             )),
         }
     }
@@ -160,6 +170,7 @@ pub fn build(name: SceneName, seed: u64) -> SceneSpec {
         SceneName::Stairs => stairs(&mut rng, s32),
         SceneName::Fence => fence(&mut rng, s32),
         SceneName::Alcove => alcove(&mut rng, s32),
+        SceneName::Wall => wall(&mut rng, s32),
     }
 }
 
@@ -412,5 +423,66 @@ fn alcove(rng: &mut ChaCha8Rng, s32: impl Fn(&mut ChaCha8Rng) -> u32) -> SceneSp
             "a plastered wall with a recess tiled in {tname}, with a {cname} vase standing in it"
         ),
         caption_without_object: format!("a plastered wall with a recess tiled in {tname}"),
+    }
+}
+
+/// A flat brick wall at z = -2 over a checkered floor, a vase standing 0.8 in front of it: the
+/// smallest scene whose hidden surface has a known shape (one plane), for the geometry of a fill.
+fn wall(rng: &mut ChaCha8Rng, s32: impl Fn(&mut ChaCha8Rng) -> u32) -> SceneSpec {
+    let zw = -2.0;
+    let floor = shape(
+        Geometry::Plane {
+            normal: [0.0, 1.0, 0.0],
+            offset: 0.0,
+        },
+        Texture::Checker {
+            a: jitter(rng, [0.66, 0.62, 0.56], 0.05),
+            b: jitter(rng, [0.38, 0.35, 0.31], 0.05),
+            cell: 0.4,
+        },
+    );
+    let (bname, brick) = PALETTE[rng.random_range(0..PALETTE.len())];
+    let bricks = shape(
+        Geometry::Plane {
+            normal: [0.0, 0.0, 1.0],
+            offset: zw,
+        },
+        Texture::Bricks {
+            brick: jitter(rng, brick, 0.08),
+            mortar: [0.88, 0.86, 0.82],
+            width: 0.3,
+            height: 0.15,
+            seed: s32(rng),
+        },
+    );
+    let (cname, color) = loop {
+        let c = PALETTE[rng.random_range(0..PALETTE.len())];
+        if c.0 != bname {
+            break c;
+        }
+    };
+    let mut shapes = vec![floor, bricks];
+    let x = rng.random_range(-0.1..0.1);
+    shapes.extend(vase(
+        rng,
+        &s32,
+        color,
+        [x, 0.0, zw + 0.8],
+        (0.26, 0.7),
+        (0.86, 0.24),
+    ));
+    SceneSpec {
+        world: World::new(shapes),
+        rig: Rig {
+            target: [0.0, 0.6, zw + 0.4],
+            radius: 3.4,
+            azimuth_deg: (-18.0, 18.0),
+            elevation_deg: 12.0,
+            hfov_deg: 48.0,
+        },
+        caption_with_object: format!(
+            "a {bname} brick wall with a {cname} vase standing in front of it"
+        ),
+        caption_without_object: format!("a {bname} brick wall"),
     }
 }

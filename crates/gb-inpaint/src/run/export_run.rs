@@ -1,0 +1,77 @@
+//! The nerfstudio export of a finished run, from its checkpoint, without training
+//! (`cargo xtask export --run OUT`): the files `inpaint --export full` writes at the end of a
+//! run ([`crate::export`]), for any run made with `--export none` (the default).
+
+use std::path::{Path, PathBuf};
+
+use gb_core::BackendKind;
+use gb_nerf::scene::LoadOptions;
+
+use crate::error::InpaintError;
+use crate::export::{write_export, ExportInfo};
+use crate::trainer::GuidedTrainer;
+
+/// Writes the export of the run folder `run` (its `config.toml` and `checkpoint.bin`) into
+/// `to` (default `RUN/export`), with `orbit_frames` cameras in `camera_path.json` (0: none),
+/// rendering on `device`. The scene is the run's (`config.toml`'s `[run] scene`), with its
+/// pre-inpainted images when the run's method used them, so that the checkpoint's training
+/// data matches. A checkpoint short of the run's step count is exported with a warning.
+pub fn export_run(
+    run: &Path,
+    to: Option<&Path>,
+    orbit_frames: usize,
+    device: BackendKind,
+) -> Result<ExportInfo, InpaintError> {
+    let config = run.join("config.toml");
+    let ckpt = run.join("checkpoint.bin");
+    for file in [&config, &ckpt] {
+        if !file.is_file() {
+            return Err(InpaintError::Spec {
+                field: format!("--run {}", run.display()),
+                reason: format!(
+                    "{} is missing: give the output folder of a finished `inpaint` run",
+                    file.display()
+                ),
+            });
+        }
+    }
+    let scene_dir = run_scene(&config)?;
+    let method = super::load_method(&config.display().to_string())?;
+    let (_, mut scene) =
+        gb_nerf::scene::load(&scene_dir, &LoadOptions::default()).map_err(|source| {
+            InpaintError::Scene {
+                what: "loading scene",
+                path: scene_dir.clone(),
+                source: Box::new(source),
+            }
+        })?;
+    if method.pre_inpainted {
+        crate::pre_inpainted::apply(&mut scene, &scene_dir)?;
+    }
+    let trainer = GuidedTrainer::for_rendering(&scene, &ckpt, device)?;
+    if trainer.step < trainer.config.train.steps {
+        tracing::warn!(
+            step = trainer.step,
+            steps = trainer.config.train.steps,
+            "the checkpoint is not at the run's last step: exporting the field as it is"
+        );
+    }
+    let dir = to.map_or_else(|| run.join("export"), Path::to_path_buf);
+    write_export(&dir, &scene, &trainer, orbit_frames)
+}
+
+/// The scene folder of the run whose `config.toml` is `config` (`[run] scene`).
+fn run_scene(config: &Path) -> Result<PathBuf, InpaintError> {
+    let text = std::fs::read_to_string(config).map_err(|e| InpaintError::io(config, e))?;
+    let bad = |reason: String| InpaintError::Spec {
+        field: config.display().to_string(),
+        reason,
+    };
+    let value: toml::Value = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    value
+        .get("run")
+        .and_then(|r| r.get("scene"))
+        .and_then(|s| s.as_str())
+        .map(PathBuf::from)
+        .ok_or_else(|| bad("no [run] scene: not the config.toml of an `inpaint` run".into()))
+}
