@@ -4,19 +4,22 @@
 //! A user of the paper's code tunes the guidance scale per scene by eye. Here the scene's own
 //! data decides, before the guided run:
 //!
-//! 1. a **pseudo-hole** is placed on observed background away from the object
-//!    ([`pseudo_hole`]): a cube whose image is withheld from the colour, depth and
-//!    sparse-point losses of every training view, so no view sees it, like the real hole;
+//! 1. **pseudo-holes** are placed on observed background away from the object
+//!    ([`pseudo_hole`]): cubes whose images are withheld from the colour, depth and
+//!    sparse-point losses of every training view, so no view sees them, like the real hole;
+//!    the first where the ring around its image looks most like the ring around the object's
+//!    mask ([`resemblance`]), up to `[auto] holes` of them on different surfaces;
 //! 2. one short **trial** per candidate (the product of `[auto] rgb` and `[auto] normal` over
 //!    the weights that are `"auto"`; the others keep their value) trains the method on the
-//!    scene with the object's masks withheld too and the pseudo-hole as the guided hole;
+//!    scene with the object's masks withheld too and the pseudo-holes as the guided hole;
 //! 3. each trial is **scored** on the withheld pixels of the training views, whose truth the
 //!    training images hold: mask-box SSIM, ST-LPIPS and D-PSNR (D-PSNR only where the scene
-//!    has depth maps), each candidate ranked per metric, the lowest rank sum winning
+//!    has depth maps) over the boxes of every pseudo-hole together (each hole's own are
+//!    recorded too), each candidate ranked per metric, the lowest rank sum winning
 //!    (`tools/diag/rank_methods.py`'s rule); a tie goes to the smaller total weight, so that
 //!    a scene gets guidance only on evidence ("model only what a scene requires").
 //!
-//! The pseudo-hole, every trial's scores and the choice go into `metrics.json`'s `auto`, and
+//! The pseudo-holes, every trial's scores and the choice go into `metrics.json`'s `auto`, and
 //! are cached in `OUT/auto/choice.json`, keyed by the contents of the scene's training views,
 //! the method, the preset, the prior (and LoRAs) and the oracle: a resumed or repeated run
 //! reuses the choice. With an `[oracle]`, the trials' guidance is the oracle's too (its
@@ -30,9 +33,11 @@
 //! normal = [0.0, 1e-5]
 //! trial_steps = 0.5      # a trial's steps, as a fraction of the run's
 //! hole_scale = 1.0       # the pseudo-hole's side, as a multiple of the mask's
+//! holes = 2              # pseudo-holes, on different surfaces (fewer where they do not fit)
 //! ```
 
 pub mod pseudo_hole;
+pub mod resemblance;
 mod weight;
 
 use std::path::{Path, PathBuf};
@@ -47,7 +52,7 @@ use gb_nerf::train::data::{downscale_mask, prepare_view};
 use gb_nerf::train::NerfConfig;
 use serde::{Deserialize, Serialize};
 
-pub use pseudo_hole::PseudoHole;
+pub use pseudo_hole::{PlacedHole, PseudoHole};
 pub use weight::Weight;
 
 use crate::error::InpaintError;
@@ -71,6 +76,8 @@ pub struct AutoSettings {
     pub trial_steps: f64,
     /// The pseudo-hole's side, as a multiple of the object mask's.
     pub hole_scale: f32,
+    /// The most pseudo-holes, each on another surface ([`pseudo_hole::place_holes`]).
+    pub holes: usize,
 }
 
 impl Default for AutoSettings {
@@ -80,6 +87,7 @@ impl Default for AutoSettings {
             normal: vec![0.0, 1e-5],
             trial_steps: 0.5,
             hole_scale: 1.0,
+            holes: 2,
         }
     }
 }
@@ -125,6 +133,9 @@ impl AutoSettings {
                 self.hole_scale
             ));
         }
+        if !(1..=4).contains(&self.holes) {
+            return Err(format!("[auto] holes = {} must be 1 to 4", self.holes));
+        }
         Ok(())
     }
 }
@@ -147,20 +158,34 @@ pub struct Trial {
     pub lpips_bbox: Option<f64>,
     /// Mask-box D-PSNR (scenes with depth maps).
     pub d_psnr_bbox: Option<f64>,
+    /// The same scores on each pseudo-hole alone, in the order of [`AutoReport::holes`].
+    #[serde(default)]
+    pub per_hole: Vec<HoleScores>,
     /// Its rank sum over the ranked metrics (lower is better).
     pub rank_sum: f64,
     /// Wall time, seconds.
     pub seconds: f64,
 }
 
+/// A trial's scores on one pseudo-hole.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HoleScores {
+    /// Mask-box SSIM.
+    pub ssim_bbox: Option<f64>,
+    /// Mask-box ST-LPIPS.
+    pub lpips_bbox: Option<f64>,
+    /// Mask-box D-PSNR.
+    pub d_psnr_bbox: Option<f64>,
+}
+
 /// What the choice did (`metrics.json`'s `auto`, and the cache file).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AutoReport {
-    /// The pseudo-hole.
-    pub hole: PseudoHole,
-    /// Training views that the pseudo-hole shows in (all withheld there).
+    /// The pseudo-holes, the one most like the hole first, each with its resemblance.
+    pub holes: Vec<PlacedHole>,
+    /// Training views that a pseudo-hole shows in (all withheld there).
     pub withheld_views: usize,
-    /// Withheld pixels over those views, at the training resolution.
+    /// Withheld pixels over those views, at the training resolution (each hole's box).
     pub withheld_pixels: usize,
     /// Steps of each trial.
     pub trial_steps: usize,
@@ -315,9 +340,15 @@ pub fn choose_weights(
         });
     }
     let started = Instant::now();
-    let hole = pseudo_hole::place(i.scene, i.method.auto.hole_scale).map_err(auto_err)?;
+    let auto = &i.method.auto;
+    let placed =
+        pseudo_hole::place_holes(i.scene, auto.hole_scale, auto.holes).map_err(auto_err)?;
     let f = i.config.train.image_downscale.max(1);
-    let holes = pseudo_hole::withheld(i.scene, &hole);
+    let each: Vec<Vec<Option<Mask>>> = placed
+        .iter()
+        .map(|p| pseudo_hole::withheld(i.scene, &p.hole))
+        .collect();
+    let holes = union_per_view(&each);
     // the trial scene: the pseudo-hole is the guided hole, the object's masks are withheld
     let mut trial_scene = i.scene.clone();
     let mut objects = Vec::new();
@@ -329,18 +360,28 @@ pub fn choose_weights(
         objects.push(v.mask.as_ref().map(|m| downscale_mask(m, f)));
         v.mask = m.clone();
     }
-    let scored = score_targets(i.scene, &holes, f);
+    let scored: Vec<Vec<ScoreTarget>> = each.iter().map(|h| score_targets(i.scene, h, f)).collect();
     let withheld_pixels = scored
         .iter()
+        .flatten()
         .map(|t| t.mask.iter().filter(|b| **b).count())
         .sum();
+    let withheld_views = holes.iter().filter(|h| h.is_some()).count();
     let steps = ((i.config.train.steps as f64 * i.method.auto.trial_steps).round() as usize).max(1);
+    for p in &placed {
+        tracing::info!(
+            hole = ?p.hole,
+            resemblance = p.resemblance,
+            whole_views = p.whole_views,
+            "auto weights: pseudo-hole placed"
+        );
+    }
     tracing::info!(
-        ?hole,
-        views = scored.len(),
+        holes = placed.len(),
+        views = withheld_views,
         pixels = withheld_pixels,
         trial_steps = steps,
-        "auto weights: pseudo-hole placed"
+        "auto weights: pseudo-holes withheld"
     );
     let mut trials = Vec::new();
     for (lambda_rgb, lambda_normal) in grid(i.method) {
@@ -365,9 +406,10 @@ pub fn choose_weights(
         trials.push(Trial {
             lambda_rgb,
             lambda_normal,
-            ssim_bbox: scores[0],
-            lpips_bbox: scores[1],
-            d_psnr_bbox: scores[2],
+            ssim_bbox: scores.0[0],
+            lpips_bbox: scores.0[1],
+            d_psnr_bbox: scores.0[2],
+            per_hole: scores.1,
             rank_sum: 0.0,
             seconds,
         });
@@ -387,8 +429,8 @@ pub fn choose_weights(
     }
     let best = best_trial(&trials);
     let report = AutoReport {
-        hole,
-        withheld_views: scored.len(),
+        holes: placed,
+        withheld_views,
         withheld_pixels,
         trial_steps: steps,
         ranked_by,
@@ -420,17 +462,40 @@ const METRICS: [(&str, bool); 3] = [
     ("d_psnr_bbox", true),
 ];
 
+/// Per training view, the union of the pseudo-holes' withheld regions (`None`: none shows).
+fn union_per_view(each: &[Vec<Option<Mask>>]) -> Vec<Option<Mask>> {
+    let views = each.first().map_or(0, Vec::len);
+    (0..views)
+        .map(|v| {
+            each.iter()
+                .filter_map(|h| h[v].as_ref())
+                .fold(None, |acc: Option<Mask>, m| {
+                    Some(match acc {
+                        None => m.clone(),
+                        Some(mut a) => {
+                            a.data.iter_mut().zip(&m.data).for_each(|(x, y)| *x |= *y);
+                            a
+                        }
+                    })
+                })
+        })
+        .collect()
+}
+
+/// The [`METRICS`] means over every pseudo-hole together, and on each alone.
+type TrialScores = ([Option<f64>; 3], Vec<HoleScores>);
+
 /// One trial: trains and scores `weights` on the trial scene; the prior is lent and handed
-/// back. Returns the [`METRICS`] means (`None` where unavailable).
+/// back. Returns the [`METRICS`] means (`None` where unavailable), pooled and per hole.
 fn trial(
     i: &AutoInputs,
     trial_scene: &Scene,
     objects: &[Option<Mask>],
-    scored: &[ScoreTarget],
+    scored: &[Vec<ScoreTarget>],
     weights: (f64, f64),
     steps: usize,
     prior: &mut Option<GuidancePrior>,
-) -> Result<[Option<f64>; 3], InpaintError> {
+) -> Result<TrialScores, InpaintError> {
     let mut method = i.method.clone();
     method.lambda_rgb = Weight::Fixed(weights.0);
     method.lambda_normal = Weight::Fixed(weights.1);
@@ -516,14 +581,39 @@ fn score_targets(scene: &Scene, holes: &[Option<Mask>], f: usize) -> Vec<ScoreTa
     targets
 }
 
-/// The [`METRICS`] of `t`'s renders of the withheld pixels' boxes.
+/// The [`METRICS`] of `t`'s renders of the withheld pixels' boxes: over every pseudo-hole's
+/// boxes together, and over each hole's alone.
 fn score(
     i: &AutoInputs,
     t: &GuidedTrainer,
-    scored: &[ScoreTarget],
-) -> Result<[Option<f64>; 3], InpaintError> {
+    scored: &[Vec<ScoreTarget>],
+) -> Result<TrialScores, InpaintError> {
+    let mut groups = Vec::new();
+    for hole in scored {
+        groups.push(render_pairs(t, hole)?);
+    }
+    let all: Vec<EvalPair> = groups.iter().flatten().cloned().collect();
+    let pooled = metric_means(i, &all)?;
+    let per_hole = if groups.len() == 1 {
+        vec![pooled]
+    } else {
+        groups
+            .iter()
+            .map(|g| metric_means(i, g))
+            .collect::<Result<_, _>>()?
+    };
+    let hole_scores = |m: [Option<f64>; 3]| HoleScores {
+        ssim_bbox: m[0],
+        lpips_bbox: m[1],
+        d_psnr_bbox: m[2],
+    };
+    Ok((pooled, per_hole.into_iter().map(hole_scores).collect()))
+}
+
+/// `t`'s render of each target's box, paired with its truth.
+fn render_pairs(t: &GuidedTrainer, targets: &[ScoreTarget]) -> Result<Vec<EvalPair>, InpaintError> {
     let mut pairs = Vec::new();
-    for target in scored {
+    for target in targets {
         let r = t.render(&target.camera)?;
         pairs.push(EvalPair {
             name: target.name.clone(),
@@ -536,11 +626,16 @@ fn score(
             pred: r.rgb,
         });
     }
+    Ok(pairs)
+}
+
+/// The [`METRICS`] means over `pairs` (`None` where unavailable).
+fn metric_means(i: &AutoInputs, pairs: &[EvalPair]) -> Result<[Option<f64>; 3], InpaintError> {
     let opts = SuiteOptions {
         metrics: Selection::Only(vec!["ssim".into(), "lpips".into(), "d_psnr".into()]),
         ..SuiteOptions::new(i.weights.clone(), i.backend)
     };
-    let report = evaluate(&PairSet::new(&pairs), &opts)?;
+    let report = evaluate(&PairSet::new(pairs), &opts)?;
     Ok(METRICS.map(|(k, _)| match report.values.get(k) {
         Some(Outcome::Value(v)) if v.is_finite() => Some(*v),
         other => {
@@ -599,6 +694,7 @@ mod tests {
             ssim_bbox: s[0],
             lpips_bbox: s[1],
             d_psnr_bbox: s[2],
+            per_hole: Vec::new(),
             rank_sum: 0.0,
             seconds: 0.0,
         }

@@ -9,14 +9,42 @@
 //! any point inside it. It is placed only where, in every training view, its image keeps a
 //! margin from the object's mask (the real hole stays the real hole), and where at least
 //! half of the masked views (two at least) see it whole.
+//!
+//! Among the places that fit, the pseudo-holes should look like the hole (issue 45): each
+//! candidate is scored by how far the ring just outside its image in the masked views is, in
+//! colour and texture ([`super::resemblance`]), from the ring just outside the object's mask,
+//! and the closest wins. Further pseudo-holes ([`place_holes`]) go on other surfaces: clear of
+//! the ones chosen by their own size, and unlike each of them in appearance, so that one flat
+//! wall does not decide the trials.
 
 use gb_nerf::scene::{Camera, Mask, Scene, Split, View};
+
+use super::resemblance::{Appearance, Sums, ViewStats};
 
 /// Candidate centres examined (an even subsample of the surface points).
 const MAX_CANDIDATES: usize = 600;
 /// The margin between a pseudo-hole's image and the object's mask, as a fraction of the
-/// pseudo-hole image's size.
+/// pseudo-hole image's size; also the width of the rings compared ([`super::resemblance`]),
+/// as a fraction of the pseudo-hole's and of the mask's side.
 const MASK_MARGIN: f32 = 0.25;
+/// The smallest appearance distance between two pseudo-holes' rings for them to count as
+/// on different surfaces.
+const OTHER_SURFACE: f32 = 0.05;
+
+/// A placed pseudo-hole, with what chose it (`metrics.json`'s `auto.holes`).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PlacedHole {
+    /// The cube.
+    pub hole: PseudoHole,
+    /// Its side as a fraction of the mask's (times `[auto] hole_scale`).
+    pub side: f32,
+    /// The appearance distance of its ring to the object's ring (0: alike).
+    pub resemblance: f32,
+    /// The statistics of its ring in the masked views.
+    pub appearance: Appearance,
+    /// The masked views that see it whole.
+    pub whole_views: usize,
+}
 
 /// A withheld cube (module docs).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -214,53 +242,128 @@ fn median(mut v: Vec<f32>) -> Option<f32> {
     Some(v[v.len() / 2])
 }
 
-/// The sides tried, largest first, as fractions of the requested one ([`place`]).
+/// The sides tried, as fractions of the requested one ([`place_holes`]).
 const SHRINK: [f32; 4] = [1.0, 0.7, 0.5, 0.35];
 
-/// Places one pseudo-hole in `scene` (module docs). `scale` multiplies its side (1: the
-/// object mask's size). Where no place keeps its margin from the masks while half the masked
-/// views see it whole (a mask that spans much of every view, as on `fence`), a smaller cube
-/// is tried, then one that two masked views see whole: the largest side wins, then the most
-/// views. Errors, with the reason, when the scene has no surface points or nothing fits.
+/// Places the pseudo-hole of `scene` that looks most like the hole ([`place_holes`] with one).
 pub fn place(scene: &Scene, scale: f32) -> Result<PseudoHole, String> {
-    let ctx = Placement::new(scene)?;
-    let half = ctx.masked.len().div_ceil(2).max(2).min(ctx.masked.len());
-    let mut last = String::new();
-    for shrink in SHRINK {
-        for need in [half, 2.min(half)] {
-            match ctx.place(scale * shrink, need) {
-                Ok(hole) => {
-                    if shrink < 1.0 || need < half {
-                        tracing::warn!(
-                            side = shrink,
-                            views = need,
-                            "auto weights: the pseudo-hole did not fit at the mask's size seen \
-                             by half the masked views; using a smaller or less seen one"
-                        );
-                    }
-                    return Ok(hole);
-                }
-                Err(e) => last = e,
-            }
-            if need == 2.min(half) {
-                break;
-            }
-        }
-    }
-    Err(last)
+    Ok(place_holes(scene, scale, 1)?[0].hole)
 }
 
-/// What every try of [`place`] reads, computed once: the training views, each one's mask
-/// as a summed-area table, the masked views' mask sides, the candidate surface points and
-/// the object's centre.
+/// Places up to `count` pseudo-holes in `scene` (module docs), the one most like the hole
+/// first. `scale` multiplies their side (1: the object mask's size). Each candidate centre is
+/// tried at the sides of [`SHRINK`] (smaller ones fit where the mask spans much of every view,
+/// as on `fence`, or in a recess, as on `alcove`), and a smaller side costs
+/// [`SMALLER_SIDE`] of resemblance. Candidates that half the masked views see whole come
+/// first; where there are none, two masked views will do. Errors, with the reason, when the
+/// scene has no surface points or nothing fits.
+pub fn place_holes(scene: &Scene, scale: f32, count: usize) -> Result<Vec<PlacedHole>, String> {
+    let ctx = Placement::new(scene)?;
+    let half = ctx.masked.len().div_ceil(2).max(2).min(ctx.masked.len());
+    let fewest = 2.min(half);
+    for need in [half, fewest] {
+        let candidates: Vec<Candidate> = SHRINK
+            .iter()
+            .flat_map(|&side| ctx.candidates(scale, side, need))
+            .collect();
+        if candidates.is_empty() {
+            if need == fewest {
+                break;
+            }
+            continue;
+        }
+        let holes = choose(candidates, count.max(1));
+        if need < half {
+            tracing::warn!(
+                views = need,
+                "auto weights: no pseudo-hole fits that half the masked views see whole; using \
+                 ones that {need} see whole"
+            );
+        }
+        return Ok(holes);
+    }
+    Err(format!(
+        "no surface point keeps a pseudo-hole's image clear of the masks while {fewest} masked \
+         views see it whole, down to {:.2} of the mask's size; give lambda_rgb and \
+         lambda_normal numbers instead of \"auto\"",
+        scale * SHRINK[SHRINK.len() - 1]
+    ))
+}
+
+/// The resemblance a pseudo-hole gives up by being smaller than the mask, per unit of side
+/// lost (colour units): at a quarter of the ring distance between a wall and a tiled recess,
+/// a smaller hole wins only where it looks clearly more like the hole.
+const SMALLER_SIDE: f32 = 0.05;
+
+/// The candidates in order of preference (resemblance with the [`SMALLER_SIDE`] cost, then
+/// seen whole by more views, then nearer the object), taken greedily: each further one must
+/// lie clear of those chosen by twice their sizes and differ from each in appearance by
+/// [`OTHER_SURFACE`].
+fn choose(mut candidates: Vec<Candidate>, count: usize) -> Vec<PlacedHole> {
+    let cost = |c: &Candidate| c.resemblance + SMALLER_SIDE * (1.0 - c.side);
+    candidates.sort_by(|a, b| {
+        cost(a)
+            .total_cmp(&cost(b))
+            .then(b.whole.cmp(&a.whole))
+            .then(a.to_object.total_cmp(&b.to_object))
+    });
+    let mut chosen: Vec<Candidate> = Vec::new();
+    for c in candidates {
+        if chosen.len() == count {
+            break;
+        }
+        let apart = chosen.iter().all(|o| {
+            let d = (0..3)
+                .map(|i| (c.centre[i] - o.centre[i]).powi(2))
+                .sum::<f32>()
+                .sqrt();
+            d >= 2.0 * (c.half + o.half) && c.appearance.distance(&o.appearance) >= OTHER_SURFACE
+        });
+        if apart {
+            chosen.push(c);
+        }
+    }
+    chosen
+        .into_iter()
+        .map(|c| PlacedHole {
+            hole: c.hole,
+            side: c.side,
+            resemblance: c.resemblance,
+            appearance: c.appearance,
+            whole_views: c.whole,
+        })
+        .collect()
+}
+
+/// What every try of [`place_holes`] reads, computed once: the training views, each one's
+/// mask as a summed-area table, the masked views' mask sides and colour statistics, the
+/// object's ring, the candidate surface points and the object's centre.
 struct Placement<'a> {
     train: Vec<&'a View>,
     /// Per training view, the summed-area table of its mask (`None`: no mask).
     integrals: Vec<Option<Vec<u32>>>,
     /// `(training view index, square root of its mask's area)` of the masked views.
     masked: Vec<(usize, f32)>,
+    /// The colour statistics of each masked view, in the order of `masked`.
+    stats: Vec<ViewStats>,
+    /// The ring just outside the object's mask, over the masked views.
+    ring: Option<Appearance>,
     points: Vec<[f32; 3]>,
     object: Option<[f32; 3]>,
+}
+
+/// A place that fits ([`Placement::fits`]), scored.
+struct Candidate {
+    hole: PseudoHole,
+    half: f32,
+    /// Its side as a fraction of the mask's (one of [`SHRINK`]).
+    side: f32,
+    centre: [f32; 3],
+    whole: usize,
+    appearance: Appearance,
+    resemblance: f32,
+    /// Distance from the object's centre.
+    to_object: f32,
 }
 
 impl<'a> Placement<'a> {
@@ -290,28 +393,58 @@ impl<'a> Placement<'a> {
             );
         }
         let object = object_centre(scene, &train);
+        let stats: Vec<ViewStats> = masked
+            .iter()
+            .map(|(k, _)| ViewStats::new(&train[*k].image, train[*k].mask.as_ref()))
+            .collect();
+        let ring = masked
+            .iter()
+            .zip(&stats)
+            .filter_map(|((k, side), st)| {
+                let width = ((MASK_MARGIN * side).round() as usize).max(2);
+                Some(st.ring(train[*k].mask.as_ref()?, width))
+            })
+            .fold(Sums::default(), |a, b| a.add(&b))
+            .appearance();
         Ok(Self {
             train,
             integrals,
             masked,
+            stats,
+            ring,
             points,
             object,
         })
     }
 
-    /// [`place`] at one side `scale`, with at least `need` masked views seeing it whole.
-    fn place(&self, scale: f32, need: usize) -> Result<PseudoHole, String> {
+    /// The statistics of the ring just outside `hole`'s image in the masked views.
+    fn ring_of(&self, hole: &PseudoHole) -> Option<Appearance> {
+        let mut sums = Sums::default();
+        for ((k, _), st) in self.masked.iter().zip(&self.stats) {
+            let Some(r) = hole.image_rect(&self.train[*k].camera) else {
+                continue;
+            };
+            let (mx, my) = (MASK_MARGIN * (r[2] - r[0]), MASK_MARGIN * (r[3] - r[1]));
+            let grown = st.rect([r[0] - mx, r[1] - my, r[2] + mx, r[3] + my]);
+            sums = sums.add(&grown.sub(&st.rect(r)));
+        }
+        sums.appearance()
+    }
+
+    /// Every candidate centre's pseudo-hole at `side` of the mask's size (times `scale`)
+    /// that fits with at least `need` masked views seeing it whole, scored.
+    fn candidates(&self, scale: f32, side: f32, need: usize) -> Vec<Candidate> {
         let stride = self.points.len().div_ceil(MAX_CANDIDATES).max(1);
-        let mut best: Option<(usize, f32, PseudoHole)> = None;
+        let mut out = Vec::new();
         for p in self.points.iter().step_by(stride) {
             // the half-side that makes the cube's image as large as the mask, per masked view
             let sizes: Vec<f32> = self
                 .masked
                 .iter()
-                .filter_map(|(k, side)| {
+                .filter_map(|(k, mask_side)| {
                     let camera = &self.train[*k].camera;
                     let (_, z) = camera.project(*p)?;
-                    Some(0.5 * scale * side * z / camera.fx)
+                    Some(0.5 * scale * side * mask_side * z / camera.fx)
                 })
                 .collect();
             let Some(half) = median(sizes) else { continue };
@@ -319,24 +452,23 @@ impl<'a> Placement<'a> {
             let Some(whole) = self.fits(&hole, need) else {
                 continue;
             };
-            let dist = self.object.map_or(0.0, |o| {
-                (0..3).map(|i| (p[i] - o[i]).powi(2)).sum::<f32>().sqrt()
-            });
-            let better = match &best {
-                None => true,
-                Some((n, d, _)) => whole > *n || (whole == *n && dist < *d),
+            let Some(appearance) = self.ring_of(&hole) else {
+                continue;
             };
-            if better {
-                best = Some((whole, dist, hole));
-            }
+            out.push(Candidate {
+                hole,
+                half,
+                side,
+                centre: *p,
+                whole,
+                appearance,
+                resemblance: self.ring.map_or(0.0, |r| r.distance(&appearance)),
+                to_object: self.object.map_or(0.0, |o| {
+                    (0..3).map(|i| (p[i] - o[i]).powi(2)).sum::<f32>().sqrt()
+                }),
+            });
         }
-        best.map(|(_, _, h)| h).ok_or_else(|| {
-            format!(
-                "no surface point keeps a pseudo-hole's image clear of the masks while {need} \
-                 masked views see it whole, down to {scale:.2} of the mask's size; give \
-                 lambda_rgb and lambda_normal numbers instead of \"auto\""
-            )
-        })
+        out
     }
 
     /// The number of masked views that see `hole` whole, when its image keeps its margin
