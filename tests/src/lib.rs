@@ -138,3 +138,21 @@ pub fn small_preset(dir: &std::path::Path, checkpoint_every: Option<usize>) -> P
     std::fs::write(&preset, fast).expect("writing small.toml");
     preset
 }
+
+/// Every file under `dir` (recursively), as paths relative to it, sorted.
+pub fn files_under(dir: &std::path::Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).expect("reading a test folder") {
+            let path = entry.expect("reading a test folder").path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                out.push(path.strip_prefix(dir).expect("under dir").to_path_buf());
+            }
+        }
+    }
+    out.sort();
+    out
+}

@@ -2,55 +2,12 @@
 //! from a finished run's checkpoint is the one `inpaint --export full` writes, file for file,
 //! for a guided method (its checkpoint holds guidance state that the export does not load).
 
-use std::path::Path;
-
-use gb_tests::{assert_success, path_str as s, small_preset, xtask};
-
-/// Every file under `dir`, as paths relative to it, sorted.
-fn files(dir: &Path) -> Vec<std::path::PathBuf> {
-    let mut out: Vec<_> = walkdir(dir)
-        .into_iter()
-        .map(|p| p.strip_prefix(dir).unwrap().to_path_buf())
-        .collect();
-    out.sort();
-    out
-}
-
-fn walkdir(dir: &Path) -> Vec<std::path::PathBuf> {
-    let mut out = Vec::new();
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            out.extend(walkdir(&path));
-        } else {
-            out.push(path);
-        }
-    }
-    out
-}
+use gb_tests::{assert_success, files_under, path_str as s, small_preset, small_stairs, xtask};
 
 #[test]
 fn export_from_the_checkpoint_equals_the_run_s_own_export() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("scene");
-    let made = xtask(&[
-        "scene",
-        "--name",
-        "stairs",
-        "--width",
-        "64",
-        "--height",
-        "48",
-        "--views",
-        "5",
-        "--test-views",
-        "1",
-        "--seed",
-        "0",
-        "--out",
-        s(&scene),
-    ]);
-    assert_success(&made, "scene");
+    let scene = small_stairs(dir.path(), 64, 48, 1);
     let preset = small_preset(dir.path(), None);
     let out = dir.path().join("run");
     let run = xtask(&[
@@ -87,7 +44,7 @@ fn export_from_the_checkpoint_equals_the_run_s_own_export() {
     let stdout = String::from_utf8_lossy(&exported.stdout);
     assert!(stdout.contains("wrote 4 views (64x48)"), "{stdout}");
 
-    let (want, got) = (files(&out.join("export")), files(&again));
+    let (want, got) = (files_under(&out.join("export")), files_under(&again));
     assert_eq!(want, got, "the files of the two exports");
     assert!(want.len() >= 2 * 4 + 2, "{want:?}");
     for f in &want {

@@ -52,6 +52,8 @@ fn the_installed_command_runs_the_default_job_without_the_source_tree() {
             "1",
             "--orbit-frames",
             "0",
+            "--export",
+            "full",
             "--out",
             "run",
         ]);

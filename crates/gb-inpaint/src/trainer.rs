@@ -414,19 +414,17 @@ impl GuidedTrainer {
         Self::resume_parts(scene, path, parts, config, method, guidance, backend, false)
     }
 
-    /// A trainer that only renders: the field of the checkpoint at `path`, written by a run
-    /// of any method, under the `none` method (no prior, no guidance state), for the export
-    /// of a finished run ([`crate::run::export_run`]). Rendering depends on the field alone.
+    /// A trainer that only renders: the field, occupancy grid and preset of the checkpoint
+    /// at `path`, written by a run of any method, under the `none` method (no prior, no
+    /// guidance state), for the export of a finished run ([`crate::run::export_run`]).
+    /// Rendering reads nothing else.
     pub fn for_rendering(
         scene: &Scene,
         path: &Path,
         backend: BackendKind,
     ) -> Result<Self, InpaintError> {
         let nerf = gb_nerf::train::Trainer::resume(scene, path, backend)?;
-        let none = MethodConfig::builtin("none")?;
-        let mut trainer = Self::new(scene, nerf.config.clone(), none, None, backend)?;
-        trainer.nerf = nerf;
-        Ok(trainer)
+        Self::from_base(nerf, scene, MethodConfig::builtin("none")?, None)
     }
 
     /// The strict resume of `cargo xtask inpaint --resume`: like [`Self::resume`], training

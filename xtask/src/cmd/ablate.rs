@@ -92,7 +92,6 @@ pub fn plan(args: &Args, scene: PathBuf) -> anyhow::Result<Grid> {
         lora: args.lora.clone(),
         weights: args.weights.clone(),
         orbit_frames: args.orbit_frames,
-        export: gb_inpaint::export::ExportMode::Full,
         ..args.grid.settings(scene, args.seed)
     };
     let grid = Grid::plan(

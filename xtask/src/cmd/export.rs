@@ -24,10 +24,11 @@ pub struct Args {
     /// The export folder (default: RUN/export).
     #[arg(long)]
     to: Option<PathBuf>,
-    /// Cameras of camera_path.json, the run's orbit (0: none).
+    /// Cameras of camera_path.json along the orbit through the scene's cameras, as
+    /// `inpaint --orbit-frames` (0: none).
     #[arg(long, default_value_t = 24)]
     orbit_frames: usize,
-    /// Compute backend: ndarray, flex or wgpu.
+    /// Compute backend: ndarray, flex or wgpu (default: the run's).
     #[arg(long, value_enum)]
     device: Option<BackendKind>,
 }
@@ -38,7 +39,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &args.run,
         args.to.as_deref(),
         args.orbit_frames,
-        args.device.unwrap_or_default(),
+        args.device,
     )?;
     println!(
         "wrote {} views ({}x{}) to {} in {:.1} s",

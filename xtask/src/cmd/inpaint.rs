@@ -200,8 +200,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     if summary.export.is_none() {
         println!(
-            "for nerfstudio: cargo xtask export --run {}",
-            args.out.display()
+            "for nerfstudio: {} export --run {}",
+            crate::program_name(),
+            gb_inpaint::run::shell_quote(&args.out.display().to_string())
         );
     }
     Ok(())

@@ -97,7 +97,9 @@ pub fn write_config(spec: &RunSpec, r: &ResolvedRun) -> Result<(), InpaintError>
     let trainer = r.trainer;
     let mut run = toml::Table::new();
     run.insert("reproduce".into(), cmd.join(" ").into());
-    run.insert("scene".into(), r.scene_dir.display().to_string().into());
+    // absolute, so that `export --run` finds it from any folder
+    let scene = std::path::absolute(r.scene_dir).unwrap_or_else(|_| r.scene_dir.to_path_buf());
+    run.insert("scene".into(), scene.display().to_string().into());
     run.insert("method".into(), r.method.name.clone().into());
     run.insert("preset".into(), trainer.config.name.clone().into());
     run.insert("device".into(), trainer.backend.name().into());

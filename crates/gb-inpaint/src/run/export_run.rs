@@ -13,14 +13,15 @@ use crate::trainer::GuidedTrainer;
 
 /// Writes the export of the run folder `run` (its `config.toml` and `checkpoint.bin`) into
 /// `to` (default `RUN/export`), with `orbit_frames` cameras in `camera_path.json` (0: none),
-/// rendering on `device`. The scene is the run's (`config.toml`'s `[run] scene`), with its
-/// pre-inpainted images when the run's method used them, so that the checkpoint's training
-/// data matches. A checkpoint short of the run's step count is exported with a warning.
+/// rendering on `device` (default: the run's, `[run] device`, so that the renders are the
+/// run's own). The scene is the run's (`[run] scene`), with its pre-inpainted images when the
+/// run's method used them, so that the checkpoint's training data matches. A checkpoint
+/// short of the run's step count is exported with a warning.
 pub fn export_run(
     run: &Path,
     to: Option<&Path>,
     orbit_frames: usize,
-    device: BackendKind,
+    device: Option<BackendKind>,
 ) -> Result<ExportInfo, InpaintError> {
     let config = run.join("config.toml");
     let ckpt = run.join("checkpoint.bin");
@@ -35,7 +36,9 @@ pub fn export_run(
             });
         }
     }
-    let scene_dir = run_scene(&config)?;
+    let recorded = RunTable::read(&config)?;
+    let scene_dir = recorded.scene;
+    let device = device.unwrap_or(recorded.device);
     let method = super::load_method(&config.display().to_string())?;
     let (_, mut scene) =
         gb_nerf::scene::load(&scene_dir, &LoadOptions::default()).map_err(|source| {
@@ -60,18 +63,24 @@ pub fn export_run(
     write_export(&dir, &scene, &trainer, orbit_frames)
 }
 
-/// The scene folder of the run whose `config.toml` is `config` (`[run] scene`).
-fn run_scene(config: &Path) -> Result<PathBuf, InpaintError> {
-    let text = std::fs::read_to_string(config).map_err(|e| InpaintError::io(config, e))?;
-    let bad = |reason: String| InpaintError::Spec {
-        field: config.display().to_string(),
-        reason,
-    };
-    let value: toml::Value = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
-    value
-        .get("run")
-        .and_then(|r| r.get("scene"))
-        .and_then(|s| s.as_str())
-        .map(PathBuf::from)
-        .ok_or_else(|| bad("no [run] scene: not the config.toml of an `inpaint` run".into()))
+/// What `export_run` reads of a run's `config.toml`'s `[run]` table.
+#[derive(serde::Deserialize)]
+struct RunTable {
+    /// The scene folder (absolute since 2026-12-05; an older run's may be relative to the
+    /// folder it was started from).
+    scene: PathBuf,
+    /// The backend the run trained on.
+    device: BackendKind,
+}
+
+impl RunTable {
+    fn read(config: &Path) -> Result<Self, InpaintError> {
+        let bad = |reason: String| InpaintError::Spec {
+            field: config.display().to_string(),
+            reason,
+        };
+        let table = super::setup::table_of(config, "run")?
+            .ok_or_else(|| bad("no [run] table: not the config.toml of an `inpaint` run".into()))?;
+        toml::from_str(&table).map_err(|e| bad(format!("[run]: {}", e.message())))
+    }
 }

@@ -7,8 +7,9 @@
 //! preset, prior and LoRA, scene and masks, output and baseline folders), trains with an
 //! atomic checkpoint (resumable exactly), then writes into `spec.out`:
 //! `config.toml` (the reproducing command and the resolved configuration),
-//! `train_log.jsonl`, `renders/`, `metrics.json` (the [`RunSummary`]), `export/`
-//! (nerfstudio), `orbit.gif` and `report.html`.
+//! `train_log.jsonl`, `renders/`, `metrics.json` (the [`RunSummary`]), `orbit.gif`,
+//! `report.html` and, with `--export full`, `export/` (nerfstudio; [`export_run`] writes it
+//! later from the checkpoint).
 
 mod config_file;
 mod export_run;

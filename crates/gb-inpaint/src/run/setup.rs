@@ -34,7 +34,7 @@ pub fn method_and_prior(spec: &RunSpec) -> (String, Option<String>) {
 
 /// The `[table]` of a run's `config.toml` (or of any TOML file that has it) as TOML text;
 /// `None` when the file has no such table.
-fn table_of(path: &Path, table: &str) -> Result<Option<String>, InpaintError> {
+pub(crate) fn table_of(path: &Path, table: &str) -> Result<Option<String>, InpaintError> {
     let text = std::fs::read_to_string(path).map_err(|e| InpaintError::io(path, e))?;
     let Ok(v) = text.parse::<toml::Table>() else {
         return Ok(None);

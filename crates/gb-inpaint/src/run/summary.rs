@@ -122,7 +122,7 @@ pub struct RunSummary {
     pub render_seconds: f64,
     /// Wall time of the metrics, s.
     pub eval_seconds: f64,
-    /// The nerfstudio export (`export/`; absent with `--export none`).
+    /// The nerfstudio export (`export/`; present only with `--export full`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub export: Option<ExportInfo>,
     /// The orbit animation, when one was written.
