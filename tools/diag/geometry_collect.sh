@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
 # Collects issue 49's runs of one scene (tools/diag/geometry_probe.sh, geometry_variants.sh):
 # the probe pictures of the first test view of each run into
-# bench/results/geometry-seed-100/figures/, and the pooled probe table into
-# bench/results/geometry-seed-100/probe-SCENE.json (tools/diag/probe_table.py).
-# Usage: tools/diag/geometry_collect.sh SCENE
+# bench/results/geometry-seed-SEED/figures/, and the pooled probe table into
+# bench/results/geometry-seed-SEED/probe-SCENE.json (tools/diag/probe_table.py). SEED defaults
+# to tuning seed 100.
+# Usage: tools/diag/geometry_collect.sh SCENE [SEED]
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-scene="$1"
-grid="out/issue49/$scene/seed-100"
-dest="bench/results/geometry-seed-100"
+scene="$1" seed="${2:-100}"
+grid="out/issue49/$scene/seed-$seed"
+dest="bench/results/geometry-seed-$seed"
 mkdir -p "$dest/figures"
 args=()
 for run in "$grid"/*/; do

@@ -1,9 +1,9 @@
 //! Weights each scene picks for itself ([`gb_inpaint::auto`]), on a small procedural stairs
 //! scene with the committed tiny SD-inpainting fixture, on flex:
 //!
-//! - the pseudo-hole is seen by no training view: no trained pixel's ray and no sparse point
-//!   that supervises crosses it, it stays clear of the object's masks, and masked views show
-//!   it;
+//! - the pseudo-holes are seen by no training view: no trained pixel's ray and no sparse point
+//!   that supervises crosses one, each stays clear of the object's masks, and masked views
+//!   show each;
 //! - the choice picks guidance when the guidance is the oracle's exact score of the true
 //!   images, and 0 when the same pull points at noise.
 
@@ -71,13 +71,23 @@ fn masked_views_showing(s: &Scene, holes: &[Option<gb_nerf::scene::Mask>]) -> us
 }
 
 #[test]
-fn a_pseudo_hole_is_seen_by_no_training_view() {
+fn the_pseudo_holes_are_seen_by_no_training_view() {
     let dir = tempfile::tempdir().unwrap();
     let s = scene(dir.path());
-    let hole = pseudo_hole::place(&s, 1.0).unwrap();
-    let holes = pseudo_hole::withheld(&s, &hole);
-    let shown = masked_views_showing(&s, &holes);
-    assert!(shown >= 2, "{shown} masked views show the pseudo-hole");
+    let placed = pseudo_hole::place_holes(&s, 1.0, 2).unwrap();
+    assert_eq!(placed.len(), 2);
+    for p in &placed {
+        let shown = masked_views_showing(&s, &pseudo_hole::withheld(&s, &p.hole));
+        assert!(
+            shown >= 2,
+            "{shown} masked views show the pseudo-hole {p:?}"
+        );
+    }
+    let each: Vec<_> = placed
+        .iter()
+        .map(|p| pseudo_hole::withheld(&s, &p.hole))
+        .collect();
+    let holes = pseudo_hole::union_per_view(&each);
     // a trial's training data: the pseudo-hole as the mask, the object withheld
     let mut trial = s.clone();
     let mut objects = Vec::new();
@@ -97,7 +107,9 @@ fn a_pseudo_hole_is_seen_by_no_training_view() {
     for p in &data.pixels {
         let c = &data.views[p.view as usize].camera;
         let d = c.ray_direction(p.x as f32 + 0.5, p.y as f32 + 0.5);
-        assert!(!hole.hit(c.origin(), d), "pixel {p:?} sees the pseudo-hole");
+        for h in &placed {
+            assert!(!h.hole.hit(c.origin(), d), "pixel {p:?} sees {h:?}");
+        }
         assert!(!objects[p.view as usize]
             .as_ref()
             .is_some_and(|m| m.data[p.y as usize * m.width + p.x as usize]));
@@ -105,26 +117,27 @@ fn a_pseudo_hole_is_seen_by_no_training_view() {
     for p in &data.sparse {
         let c = &data.views[p.view as usize].camera;
         let world = c.unproject(p.x, p.y, p.depth);
-        assert!(
-            !hole.contains(world),
-            "sparse point {p:?} lies in the pseudo-hole"
-        );
-        assert!(!hole.hit(c.origin(), c.ray_direction(p.x, p.y)));
+        for h in &placed {
+            assert!(!h.hole.contains(world), "sparse point {p:?} lies in {h:?}");
+            assert!(!h.hole.hit(c.origin(), c.ray_direction(p.x, p.y)));
+        }
     }
-    // the hole is centred on a surface: its pixels were training pixels before
+    // each hole is centred on a surface: its pixels were training pixels before
     let all = TrainData::from_scene(&s, 1, DepthSupervision::None).unwrap();
-    let seen_before = all
-        .pixels
-        .iter()
-        .filter(|p| {
-            let c = &all.views[p.view as usize].camera;
-            hole.hit(
-                c.origin(),
-                c.ray_direction(p.x as f32 + 0.5, p.y as f32 + 0.5),
-            )
-        })
-        .count();
-    assert!(seen_before > 50, "{seen_before}");
+    for h in &placed {
+        let seen_before = all
+            .pixels
+            .iter()
+            .filter(|p| {
+                let c = &all.views[p.view as usize].camera;
+                h.hole.hit(
+                    c.origin(),
+                    c.ray_direction(p.x as f32 + 0.5, p.y as f32 + 0.5),
+                )
+            })
+            .count();
+        assert!(seen_before > 50, "{seen_before} for {h:?}");
+    }
 }
 
 #[test]

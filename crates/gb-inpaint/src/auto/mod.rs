@@ -348,7 +348,7 @@ pub fn choose_weights(
         .iter()
         .map(|p| pseudo_hole::withheld(i.scene, &p.hole))
         .collect();
-    let holes = union_per_view(&each);
+    let holes = pseudo_hole::union_per_view(&each);
     // the trial scene: the pseudo-hole is the guided hole, the object's masks are withheld
     let mut trial_scene = i.scene.clone();
     let mut objects = Vec::new();
@@ -461,26 +461,6 @@ const METRICS: [(&str, bool); 3] = [
     ("lpips_bbox", false),
     ("d_psnr_bbox", true),
 ];
-
-/// Per training view, the union of the pseudo-holes' withheld regions (`None`: none shows).
-fn union_per_view(each: &[Vec<Option<Mask>>]) -> Vec<Option<Mask>> {
-    let views = each.first().map_or(0, Vec::len);
-    (0..views)
-        .map(|v| {
-            each.iter()
-                .filter_map(|h| h[v].as_ref())
-                .fold(None, |acc: Option<Mask>, m| {
-                    Some(match acc {
-                        None => m.clone(),
-                        Some(mut a) => {
-                            a.data.iter_mut().zip(&m.data).for_each(|(x, y)| *x |= *y);
-                            a
-                        }
-                    })
-                })
-        })
-        .collect()
-}
 
 /// The [`METRICS`] means over every pseudo-hole together, and on each alone.
 type TrialScores = ([Option<f64>; 3], Vec<HoleScores>);

@@ -526,6 +526,26 @@ pub fn withheld(scene: &Scene, hole: &PseudoHole) -> Vec<Option<Mask>> {
         .collect()
 }
 
+/// Per training view, the union of the pseudo-holes' withheld regions (`None`: none shows).
+pub fn union_per_view(each: &[Vec<Option<Mask>>]) -> Vec<Option<Mask>> {
+    let views = each.first().map_or(0, Vec::len);
+    (0..views)
+        .map(|v| {
+            each.iter()
+                .filter_map(|h| h[v].as_ref())
+                .fold(None, |acc: Option<Mask>, m| {
+                    Some(match acc {
+                        None => m.clone(),
+                        Some(mut a) => {
+                            a.data.iter_mut().zip(&m.data).for_each(|(x, y)| *x |= *y);
+                            a
+                        }
+                    })
+                })
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
