@@ -389,6 +389,25 @@ impl GuidedTrainer {
         Self::from_base(nerf, scene, method, guidance)
     }
 
+    /// [`Self::new_withholding`] continuing from the checkpoint at `prefix`, written by a
+    /// trainer of the same scene, preset and withheld pixels (the auto-weight trials' shared
+    /// unguided prefix, [`crate::auto`]): the field, optimiser, occupancy grid, step and random
+    /// stream are the prefix's, and training goes on to `config`'s step count under `method`.
+    pub(crate) fn continue_withholding(
+        scene: &Scene,
+        config: NerfConfig,
+        method: MethodConfig,
+        guidance: Option<(GuidancePrior, Prompts)>,
+        backend: BackendKind,
+        withheld: &[Option<gb_nerf::scene::Mask>],
+        prefix: &Path,
+    ) -> Result<Self, InpaintError> {
+        let mut nerf = Trainer::new(scene, config, backend)?;
+        nerf.withhold(withheld)?;
+        let nerf = Trainer::restore(nerf, prefix, checkpoint::load(prefix)?)?;
+        Self::from_base(nerf, scene, method, guidance)
+    }
+
     /// The prior, handed back when the trainer is done with it.
     pub fn into_prior(self) -> Option<GuidancePrior> {
         self.guidance.map(|g| g.prior)

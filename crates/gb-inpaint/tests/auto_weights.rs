@@ -255,6 +255,10 @@ fn auto_weights_choose_the_oracles_guidance_and_refuse_a_pull_toward_noise() {
     }
     assert_eq!(truth.trials.len(), 2);
     assert!(truth.withheld_views >= 2 && truth.withheld_pixels > 50);
+    // the trials continue from one unguided prefix: 0.75 of their 80 steps
+    assert_eq!((truth.trial_steps, truth.prefix_steps), (80, 60));
+    assert_eq!(truth.holes.len(), 2);
+    assert!(truth.trials.iter().all(|t| t.per_hole.len() == 2));
     // the true pull improves the hidden colour; the noise pull ruins it
     let ssim = |r: &gb_inpaint::auto::AutoReport, k: usize| r.trials[k].ssim_bbox.unwrap();
     assert!(ssim(&truth, 1) > ssim(&truth, 0), "{truth:?}");

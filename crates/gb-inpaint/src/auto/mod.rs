@@ -11,7 +11,10 @@
 //!    mask ([`resemblance`]), up to `[auto] holes` of them on different surfaces;
 //! 2. one short **trial** per candidate (the product of `[auto] rgb` and `[auto] normal` over
 //!    the weights that are `"auto"`; the others keep their value) trains the method on the
-//!    scene with the object's masks withheld too and the pseudo-holes as the guided hole;
+//!    scene with the object's masks withheld too and the pseudo-holes as the guided hole. The
+//!    first `[auto] prefix` of a trial's steps carry no guidance, so they are trained once,
+//!    unguided, and every trial continues from them (the same field, optimiser and random
+//!    stream): only the guided rest is paid per trial;
 //! 3. each trial is **scored** on the withheld pixels of the training views, whose truth the
 //!    training images hold: mask-box SSIM, ST-LPIPS and D-PSNR (D-PSNR only where the scene
 //!    has depth maps) over the boxes of every pseudo-hole together (each hole's own are
@@ -34,6 +37,7 @@
 //! trial_steps = 0.5      # a trial's steps, as a fraction of the run's
 //! hole_scale = 1.0       # the pseudo-hole's side, as a multiple of the mask's
 //! holes = 2              # pseudo-holes, on different surfaces (fewer where they do not fit)
+//! prefix = 0.75          # the share of a trial's steps trained once, unguided, for all
 //! ```
 
 pub mod pseudo_hole;
@@ -63,6 +67,8 @@ use crate::trainer::{FitOptions, GuidedTrainer};
 
 /// The cache's folder in the run folder.
 pub const FOLDER: &str = "auto";
+/// The shared unguided prefix's checkpoint, in [`FOLDER`].
+const PREFIX_FILE: &str = "prefix.bin";
 
 /// `[auto]` of a method (module docs).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -78,6 +84,9 @@ pub struct AutoSettings {
     pub hole_scale: f32,
     /// The most pseudo-holes, each on another surface ([`pseudo_hole::place_holes`]).
     pub holes: usize,
+    /// The share of a trial's steps trained once, without guidance, and shared by every
+    /// trial (0: each trial trains from scratch).
+    pub prefix: f64,
 }
 
 impl Default for AutoSettings {
@@ -88,6 +97,7 @@ impl Default for AutoSettings {
             trial_steps: 0.5,
             hole_scale: 1.0,
             holes: 2,
+            prefix: 0.75,
         }
     }
 }
@@ -132,6 +142,9 @@ impl AutoSettings {
                 "[auto] hole_scale = {} must be in (0, 4]",
                 self.hole_scale
             ));
+        }
+        if !(self.prefix.is_finite() && (0.0..1.0).contains(&self.prefix)) {
+            return Err(format!("[auto] prefix = {} must be in [0, 1)", self.prefix));
         }
         if !(1..=4).contains(&self.holes) {
             return Err(format!("[auto] holes = {} must be 1 to 4", self.holes));
@@ -187,8 +200,14 @@ pub struct AutoReport {
     pub withheld_views: usize,
     /// Withheld pixels over those views, at the training resolution (each hole's box).
     pub withheld_pixels: usize,
-    /// Steps of each trial.
+    /// Steps of each trial (the shared prefix's included).
     pub trial_steps: usize,
+    /// Steps of the shared unguided prefix (0: none).
+    #[serde(default)]
+    pub prefix_steps: usize,
+    /// Wall time of the shared prefix, seconds.
+    #[serde(default)]
+    pub prefix_seconds: f64,
     /// The metrics that ranked the trials.
     pub ranked_by: Vec<String>,
     /// Every trial, in grid order.
@@ -383,16 +402,30 @@ pub fn choose_weights(
         trial_steps = steps,
         "auto weights: pseudo-holes withheld"
     );
+    let prefix_start = Instant::now();
+    let prefix_steps = ((steps as f64 * auto.prefix).round() as usize).min(steps - 1);
+    let prefix = if prefix_steps > 0 {
+        let path = dir.join(PREFIX_FILE);
+        std::fs::create_dir_all(&dir).map_err(|e| InpaintError::io(&dir, e))?;
+        shared_prefix(i, &trial_scene, &objects, prefix_steps, &path)?;
+        Some(path)
+    } else {
+        None
+    };
+    let prefix_seconds = prefix_start.elapsed().as_secs_f64();
     let mut trials = Vec::new();
     for (lambda_rgb, lambda_normal) in grid(i.method) {
         let t0 = Instant::now();
         let scores = trial(
             i,
-            &trial_scene,
-            &objects,
-            &scored,
+            &TrialSetup {
+                scene: &trial_scene,
+                objects: &objects,
+                scored: &scored,
+                steps,
+                prefix: prefix.as_deref(),
+            },
             (lambda_rgb, lambda_normal),
-            steps,
             prior,
         )?;
         let seconds = t0.elapsed().as_secs_f64();
@@ -433,6 +466,8 @@ pub fn choose_weights(
         withheld_views,
         withheld_pixels,
         trial_steps: steps,
+        prefix_steps,
+        prefix_seconds,
         ranked_by,
         lambda_rgb: trials[best].lambda_rgb,
         lambda_normal: trials[best].lambda_normal,
@@ -465,15 +500,51 @@ const METRICS: [(&str, bool); 3] = [
 /// The [`METRICS`] means over every pseudo-hole together, and on each alone.
 type TrialScores = ([Option<f64>; 3], Vec<HoleScores>);
 
-/// One trial: trains and scores `weights` on the trial scene; the prior is lent and handed
-/// back. Returns the [`METRICS`] means (`None` where unavailable), pooled and per hole.
+/// What every trial shares.
+struct TrialSetup<'a> {
+    /// The trial scene: the pseudo-holes as its masks.
+    scene: &'a Scene,
+    /// The object's masks per training view, withheld.
+    objects: &'a [Option<Mask>],
+    /// Each pseudo-hole's score targets.
+    scored: &'a [Vec<ScoreTarget>],
+    /// Steps of a trial, the prefix's included.
+    steps: usize,
+    /// The shared unguided prefix's checkpoint, if any.
+    prefix: Option<&'a Path>,
+}
+
+/// Trains the trial scene without guidance (the `none` method) for `steps` and writes the
+/// checkpoint `path` that every trial continues from.
+fn shared_prefix(
+    i: &AutoInputs,
+    scene: &Scene,
+    objects: &[Option<Mask>],
+    steps: usize,
+    path: &Path,
+) -> Result<(), InpaintError> {
+    let mut config = i.config.clone();
+    config.train.steps = steps;
+    let none = MethodConfig::builtin("none")?;
+    let mut t = GuidedTrainer::new_withholding(scene, config, none, None, i.backend, objects)?;
+    t.fit(&FitOptions {
+        checkpoint: None,
+        log: None,
+        append_log: false,
+        progress: i.progress,
+    })?;
+    t.nerf.save_checkpoint(path)?;
+    tracing::info!(steps, "auto weights: the trials' shared unguided prefix");
+    Ok(())
+}
+
+/// One trial: trains and scores `weights` on the trial scene (from the shared prefix, when
+/// there is one); the prior is lent and handed back. Returns the [`METRICS`] means (`None`
+/// where unavailable), pooled and per hole.
 fn trial(
     i: &AutoInputs,
-    trial_scene: &Scene,
-    objects: &[Option<Mask>],
-    scored: &[Vec<ScoreTarget>],
+    setup: &TrialSetup,
     weights: (f64, f64),
-    steps: usize,
     prior: &mut Option<GuidancePrior>,
 ) -> Result<TrialScores, InpaintError> {
     let mut method = i.method.clone();
@@ -482,7 +553,7 @@ fn trial(
     method.personalize = Default::default();
     method.reference = Default::default();
     let mut config = i.config.clone();
-    config.train.steps = steps;
+    config.train.steps = setup.steps;
     let guidance = if method.needs_prior() {
         let p = prior.take().ok_or_else(|| InpaintError::PriorRequired {
             method: method.name.clone(),
@@ -491,8 +562,15 @@ fn trial(
     } else {
         None
     };
-    let mut t =
-        GuidedTrainer::new_withholding(trial_scene, config, method, guidance, i.backend, objects)?;
+    let (scene, objects) = (setup.scene, setup.objects);
+    let mut t = match setup.prefix {
+        Some(prefix) => GuidedTrainer::continue_withholding(
+            scene, config, method, guidance, i.backend, objects, prefix,
+        )?,
+        None => {
+            GuidedTrainer::new_withholding(scene, config, method, guidance, i.backend, objects)?
+        }
+    };
     if let (Some(images), Some(_)) = (i.oracle, i.method.oracle.clean.as_ref()) {
         t.set_oracle(crate::oracle::OracleTargets::new(
             images.to_vec(),
@@ -505,7 +583,7 @@ fn trial(
         append_log: false,
         progress: i.progress,
     });
-    let scores = fitted.and_then(|_| score(i, &t, scored));
+    let scores = fitted.and_then(|_| score(i, &t, setup.scored));
     *prior = t.into_prior().or(prior.take());
     scores
 }
@@ -714,6 +792,12 @@ mod tests {
         assert_eq!(grid(&m)[3], (1e-5, 3e-5));
         m.auto.trial_steps = 0.0;
         assert!(m.validate().unwrap_err().contains("trial_steps"));
+        m.auto.trial_steps = 0.5;
+        m.auto.prefix = 1.0;
+        assert!(m.validate().unwrap_err().contains("[auto] prefix = 1"));
+        m.auto.prefix = 0.0;
+        m.auto.holes = 0;
+        assert!(m.validate().unwrap_err().contains("[auto] holes = 0"));
         let mut none = MethodConfig::builtin("bsd").unwrap();
         none.normal = None;
         none.lambda_normal = Weight::Auto;

@@ -462,11 +462,18 @@ impl Trainer {
         config: NerfConfig,
         backend: BackendKind,
     ) -> Result<Self, NerfError> {
+        Self::restore(Self::new(scene, config, backend)?, path, parts)
+    }
+
+    /// Restores the state of the checkpoint `parts` (read from `path`) into `t`, a fresh
+    /// trainer of the same training data (withheld pixels included: see [`Self::withhold`]):
+    /// parameters, optimiser state, occupancy grid, step and random stream. Errors (naming
+    /// the file) when the checkpoint was written for other training data.
+    pub fn restore(mut t: Self, path: &Path, parts: CheckpointParts) -> Result<Self, NerfError> {
         let e = |r: String| NerfError::Checkpoint {
             path: path.to_path_buf(),
             reason: r,
         };
-        let mut t = Self::new(scene, config, backend)?;
         let fingerprint = format!("{:016x}", t.data_fingerprint);
         if parts.meta.scene != t.scene || parts.meta.data_fingerprint != fingerprint {
             return Err(e(format!(
