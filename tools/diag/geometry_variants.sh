@@ -3,7 +3,9 @@
 # [geometry] table (gb_inpaint::geometry) appended to its method file, run with --probe on
 # the same scene, seed and preset. Method files land in bench/results/geometry-seed-100/methods/,
 # runs in out/issue49/SCENE/seed-100/ROW-VARIANT/.
-# Usage: tools/diag/geometry_variants.sh SCENE VARIANT "TOML LINES" [ROW ...]
+# SEED (default 100) picks the seed's runs (out/issue49/SCENE/seed-SEED/, method files in
+# bench/results/geometry-seed-SEED/methods/); GB_NERF names the binary (default: cargo xtask).
+# Usage: [SEED=N] [GB_NERF=BIN] tools/diag/geometry_variants.sh SCENE VARIANT "TOML LINES" [ROW ...]
 #   e.g. tools/diag/geometry_variants.sh stairs depth1 "depth_weight = 1.0" reference-oracle
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -13,9 +15,11 @@ scene="$1" variant="$2" table="$3"
 shift 3
 rows=("$@")
 [ ${#rows[@]} -gt 0 ] || rows=(reference-oracle score-oracle)
-grid="out/issue49/$scene/seed-100"
-scene_dir="out/issue49/$scene-scene-seed-100"
-methods="bench/results/geometry-seed-100/methods"
+seed="${SEED:-100}"
+grid="out/issue49/$scene/seed-$seed"
+scene_dir="out/issue49/$scene-scene-seed-$seed"
+methods="bench/results/geometry-seed-$seed/methods"
+if [ -n "${GB_NERF:-}" ]; then run=("$GB_NERF"); else run=(cargo xtask); fi
 mkdir -p "$methods"
 for row in "${rows[@]}"; do
     name="$scene-$row-$variant"
@@ -25,7 +29,7 @@ for row in "${rows[@]}"; do
     sed -e "s/^name = \"$row\"/name = \"$row-$variant\"/" "$grid/$row.toml" |
         awk '/^\[geometry\]$/ { skip = 1; next } /^\[/ { skip = 0 } !skip' > "$file"
     printf '\n[geometry]\n%b\n' "$table" >> "$file"
-    cargo xtask inpaint --scene "$scene_dir" --method "$file" --seed 100 --preset fast \
+    "${run[@]}" inpaint --scene "$scene_dir" --method "$file" --seed "$seed" --preset fast \
         --weights "${GB_TEST_DATA:-../shared}/weights" --export none --orbit-frames 0 --probe \
         --out "$grid/$row-$variant"
 done

@@ -384,28 +384,28 @@ impl GuidedTrainer {
         backend: BackendKind,
         withheld: &[Option<gb_nerf::scene::Mask>],
     ) -> Result<Self, InpaintError> {
-        let mut nerf = Trainer::new(scene, config, backend)?;
-        nerf.withhold(withheld)?;
+        let nerf = Self::withholding_base(scene, config, backend, withheld, None)?;
         Self::from_base(nerf, scene, method, guidance)
     }
 
-    /// [`Self::new_withholding`] continuing from the checkpoint at `prefix`, written by a
-    /// trainer of the same scene, preset and withheld pixels (the auto-weight trials' shared
-    /// unguided prefix, [`crate::auto`]): the field, optimiser, occupancy grid, step and random
-    /// stream are the prefix's, and training goes on to `config`'s step count under `method`.
-    pub(crate) fn continue_withholding(
+    /// The reconstruction trainer of `scene` with the pixels `withheld` from every loss,
+    /// restored from the checkpoint at `prefix` when given: one written by a trainer of the
+    /// same scene, preset and withheld pixels (the auto-weight trials' shared unguided
+    /// prefix, [`crate::auto`]), whose field, optimiser, occupancy grid, step and random
+    /// stream it continues; `config`'s step count is where it stops.
+    pub(crate) fn withholding_base(
         scene: &Scene,
         config: NerfConfig,
-        method: MethodConfig,
-        guidance: Option<(GuidancePrior, Prompts)>,
         backend: BackendKind,
         withheld: &[Option<gb_nerf::scene::Mask>],
-        prefix: &Path,
-    ) -> Result<Self, InpaintError> {
+        prefix: Option<&Path>,
+    ) -> Result<Trainer, InpaintError> {
         let mut nerf = Trainer::new(scene, config, backend)?;
         nerf.withhold(withheld)?;
-        let nerf = Trainer::restore(nerf, prefix, checkpoint::load(prefix)?)?;
-        Self::from_base(nerf, scene, method, guidance)
+        Ok(match prefix {
+            Some(path) => Trainer::restore(nerf, path, checkpoint::load(path)?)?,
+            None => nerf,
+        })
     }
 
     /// The prior, handed back when the trainer is done with it.
@@ -545,7 +545,8 @@ impl GuidedTrainer {
         serde_json::to_value(&state).map_err(|e| state_error(e.to_string()))
     }
 
-    fn from_base(
+    /// The guided trainer around the reconstruction trainer `nerf` (fresh or restored).
+    pub(crate) fn from_base(
         nerf: Trainer,
         scene: &Scene,
         method: MethodConfig,

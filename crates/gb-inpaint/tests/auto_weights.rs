@@ -259,6 +259,17 @@ fn auto_weights_choose_the_oracles_guidance_and_refuse_a_pull_toward_noise() {
     assert_eq!((truth.trial_steps, truth.prefix_steps), (80, 60));
     assert_eq!(truth.holes.len(), 2);
     assert!(truth.trials.iter().all(|t| t.per_hole.len() == 2));
+    // the pooled score lies between the holes' own (a mean over both holes' boxes)
+    for t in &truth.trials {
+        let own: Vec<f64> = t.per_hole.iter().map(|h| h.ssim_bbox.unwrap()).collect();
+        let pooled = t.ssim_bbox.unwrap();
+        assert!(
+            own[0].min(own[1]) <= pooled && pooled <= own[0].max(own[1]),
+            "{t:?}"
+        );
+    }
+    // the prefix's checkpoint is gone once the trials are done
+    assert!(!dir.path().join("truth/auto/prefix.bin").exists());
     // the true pull improves the hidden colour; the noise pull ruins it
     let ssim = |r: &gb_inpaint::auto::AutoReport, k: usize| r.trials[k].ssim_bbox.unwrap();
     assert!(ssim(&truth, 1) > ssim(&truth, 0), "{truth:?}");

@@ -12,9 +12,11 @@
 //! 2. one short **trial** per candidate (the product of `[auto] rgb` and `[auto] normal` over
 //!    the weights that are `"auto"`; the others keep their value) trains the method on the
 //!    scene with the object's masks withheld too and the pseudo-holes as the guided hole. The
-//!    first `[auto] prefix` of a trial's steps carry no guidance, so they are trained once,
-//!    unguided, and every trial continues from them (the same field, optimiser and random
-//!    stream): only the guided rest is paid per trial;
+//!    first `[auto] prefix` of a trial's steps are trained once, without guidance, and every
+//!    trial continues from them (the same field, optimiser and random stream), so only the
+//!    guided rest is paid per trial. A trial is thus guided over its last quarter (default),
+//!    where the run guides from a twentieth (normal) or a fifth (RGB) of its steps on: the
+//!    trials compare the guidance on a nearly trained field, for a quarter of the cost;
 //! 3. each trial is **scored** on the withheld pixels of the training views, whose truth the
 //!    training images hold: mask-box SSIM, ST-LPIPS and D-PSNR (D-PSNR only where the scene
 //!    has depth maps) over the boxes of every pseudo-hole together (each hole's own are
@@ -198,7 +200,7 @@ pub struct AutoReport {
     pub holes: Vec<PlacedHole>,
     /// Training views that a pseudo-hole shows in (all withheld there).
     pub withheld_views: usize,
-    /// Withheld pixels over those views, at the training resolution (each hole's box).
+    /// Withheld pixels over those views, at the training resolution, summed over the holes.
     pub withheld_pixels: usize,
     /// Steps of each trial (the shared prefix's included).
     pub trial_steps: usize,
@@ -413,40 +415,21 @@ pub fn choose_weights(
         None
     };
     let prefix_seconds = prefix_start.elapsed().as_secs_f64();
-    let mut trials = Vec::new();
-    for (lambda_rgb, lambda_normal) in grid(i.method) {
-        let t0 = Instant::now();
-        let scores = trial(
-            i,
-            &TrialSetup {
-                scene: &trial_scene,
-                objects: &objects,
-                scored: &scored,
-                steps,
-                prefix: prefix.as_deref(),
-            },
-            (lambda_rgb, lambda_normal),
-            prior,
-        )?;
-        let seconds = t0.elapsed().as_secs_f64();
-        tracing::info!(
-            lambda_rgb,
-            lambda_normal,
-            ?scores,
-            seconds,
-            "auto weights: trial"
-        );
-        trials.push(Trial {
-            lambda_rgb,
-            lambda_normal,
-            ssim_bbox: scores.0[0],
-            lpips_bbox: scores.0[1],
-            d_psnr_bbox: scores.0[2],
-            per_hole: scores.1,
-            rank_sum: 0.0,
-            seconds,
-        });
+    let setup = TrialSetup {
+        scene: &trial_scene,
+        objects: &objects,
+        scored: &scored,
+        steps,
+        prefix: prefix.as_deref(),
+    };
+    let trials = run_trials(i, &setup, prior);
+    if let Some(path) = &prefix {
+        // the field and optimiser of the prefix: no use once the trials are done
+        if let Err(e) = std::fs::remove_file(path) {
+            tracing::warn!(path = %path.display(), error = %e, "auto weights: prefix left");
+        }
     }
+    let mut trials = trials?;
     let ranked_by = rank(&mut trials);
     let left_out: Vec<&str> = METRICS
         .iter()
@@ -514,6 +497,38 @@ struct TrialSetup<'a> {
     prefix: Option<&'a Path>,
 }
 
+/// Every trial of the grid, in grid order.
+fn run_trials(
+    i: &AutoInputs,
+    setup: &TrialSetup,
+    prior: &mut Option<GuidancePrior>,
+) -> Result<Vec<Trial>, InpaintError> {
+    let mut trials = Vec::new();
+    for (lambda_rgb, lambda_normal) in grid(i.method) {
+        let t0 = Instant::now();
+        let scores = trial(i, setup, (lambda_rgb, lambda_normal), prior)?;
+        let seconds = t0.elapsed().as_secs_f64();
+        tracing::info!(
+            lambda_rgb,
+            lambda_normal,
+            ?scores,
+            seconds,
+            "auto weights: trial"
+        );
+        trials.push(Trial {
+            lambda_rgb,
+            lambda_normal,
+            ssim_bbox: scores.0[0],
+            lpips_bbox: scores.0[1],
+            d_psnr_bbox: scores.0[2],
+            per_hole: scores.1,
+            rank_sum: 0.0,
+            seconds,
+        });
+    }
+    Ok(trials)
+}
+
 /// Trains the trial scene without guidance (the `none` method) for `steps` and writes the
 /// checkpoint `path` that every trial continues from.
 fn shared_prefix(
@@ -554,6 +569,14 @@ fn trial(
     method.reference = Default::default();
     let mut config = i.config.clone();
     config.train.steps = setup.steps;
+    // the field first, so that a failure here leaves the prior with the caller
+    let nerf = GuidedTrainer::withholding_base(
+        setup.scene,
+        config,
+        i.backend,
+        setup.objects,
+        setup.prefix,
+    )?;
     let guidance = if method.needs_prior() {
         let p = prior.take().ok_or_else(|| InpaintError::PriorRequired {
             method: method.name.clone(),
@@ -562,15 +585,7 @@ fn trial(
     } else {
         None
     };
-    let (scene, objects) = (setup.scene, setup.objects);
-    let mut t = match setup.prefix {
-        Some(prefix) => GuidedTrainer::continue_withholding(
-            scene, config, method, guidance, i.backend, objects, prefix,
-        )?,
-        None => {
-            GuidedTrainer::new_withholding(scene, config, method, guidance, i.backend, objects)?
-        }
-    };
+    let mut t = GuidedTrainer::from_base(nerf, setup.scene, method, guidance)?;
     if let (Some(images), Some(_)) = (i.oracle, i.method.oracle.clean.as_ref()) {
         t.set_oracle(crate::oracle::OracleTargets::new(
             images.to_vec(),
@@ -640,32 +655,53 @@ fn score_targets(scene: &Scene, holes: &[Option<Mask>], f: usize) -> Vec<ScoreTa
 }
 
 /// The [`METRICS`] of `t`'s renders of the withheld pixels' boxes: over every pseudo-hole's
-/// boxes together, and over each hole's alone.
+/// boxes together, and over each hole's alone (the means of its boxes' per-image values, from
+/// the same evaluation).
 fn score(
     i: &AutoInputs,
     t: &GuidedTrainer,
     scored: &[Vec<ScoreTarget>],
 ) -> Result<TrialScores, InpaintError> {
-    let mut groups = Vec::new();
-    for hole in scored {
-        groups.push(render_pairs(t, hole)?);
+    let mut all = Vec::new();
+    let mut hole_of = Vec::new();
+    for (h, hole) in scored.iter().enumerate() {
+        let pairs = render_pairs(t, hole)?;
+        hole_of.extend(std::iter::repeat_n(h, pairs.len()));
+        all.extend(pairs);
     }
-    let all: Vec<EvalPair> = groups.iter().flatten().cloned().collect();
-    let pooled = metric_means(i, &all)?;
-    let per_hole = if groups.len() == 1 {
-        vec![pooled]
-    } else {
-        groups
+    let opts = SuiteOptions {
+        metrics: Selection::Only(vec!["ssim".into(), "lpips".into(), "d_psnr".into()]),
+        ..SuiteOptions::new(i.weights.clone(), i.backend)
+    };
+    let report = evaluate(&PairSet::new(&all), &opts)?;
+    let pooled = METRICS.map(|(k, _)| match report.values.get(k) {
+        Some(Outcome::Value(v)) if v.is_finite() => Some(*v),
+        other => {
+            tracing::debug!(metric = k, ?other, "auto weights: metric not ranked");
+            None
+        }
+    });
+    let hole_mean = |h: usize, k: &str| {
+        let values: Vec<f64> = report
+            .per_image
             .iter()
-            .map(|g| metric_means(i, g))
-            .collect::<Result<_, _>>()?
+            .zip(&hole_of)
+            .filter(|(_, owner)| **owner == h)
+            .filter_map(|((_, m), _)| m.get(k).copied().filter(|v| v.is_finite()))
+            .collect();
+        (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
     };
-    let hole_scores = |m: [Option<f64>; 3]| HoleScores {
-        ssim_bbox: m[0],
-        lpips_bbox: m[1],
-        d_psnr_bbox: m[2],
-    };
-    Ok((pooled, per_hole.into_iter().map(hole_scores).collect()))
+    let per_hole = (0..scored.len())
+        .map(|h| {
+            let m = METRICS.map(|(k, _)| hole_mean(h, k));
+            HoleScores {
+                ssim_bbox: m[0],
+                lpips_bbox: m[1],
+                d_psnr_bbox: m[2],
+            }
+        })
+        .collect();
+    Ok((pooled, per_hole))
 }
 
 /// `t`'s render of each target's box, paired with its truth.
@@ -685,22 +721,6 @@ fn render_pairs(t: &GuidedTrainer, targets: &[ScoreTarget]) -> Result<Vec<EvalPa
         });
     }
     Ok(pairs)
-}
-
-/// The [`METRICS`] means over `pairs` (`None` where unavailable).
-fn metric_means(i: &AutoInputs, pairs: &[EvalPair]) -> Result<[Option<f64>; 3], InpaintError> {
-    let opts = SuiteOptions {
-        metrics: Selection::Only(vec!["ssim".into(), "lpips".into(), "d_psnr".into()]),
-        ..SuiteOptions::new(i.weights.clone(), i.backend)
-    };
-    let report = evaluate(&PairSet::new(pairs), &opts)?;
-    Ok(METRICS.map(|(k, _)| match report.values.get(k) {
-        Some(Outcome::Value(v)) if v.is_finite() => Some(*v),
-        other => {
-            tracing::debug!(metric = k, ?other, "auto weights: metric not ranked");
-            None
-        }
-    }))
 }
 
 /// Ranks the trials per metric that every trial has (1 best, ties sharing the mean rank),

@@ -13,9 +13,9 @@
 //! Among the places that fit, the pseudo-holes should look like the hole (issue 45): each
 //! candidate is scored by how far the ring just outside its image in the masked views is, in
 //! colour and texture ([`super::resemblance`]), from the ring just outside the object's mask,
-//! and the closest wins. Further pseudo-holes ([`place_holes`]) go on other surfaces: clear of
-//! the ones chosen by their own size, and unlike each of them in appearance, so that one flat
-//! wall does not decide the trials.
+//! and the closest wins. Further pseudo-holes ([`place_holes`]) go on other surfaces: their
+//! centres at least twice their two half-sides apart from those chosen, and unlike each of
+//! them in appearance, so that one flat wall does not decide the trials.
 
 use gb_nerf::scene::{Camera, Mask, Scene, Split, View};
 
@@ -262,10 +262,11 @@ pub fn place_holes(scene: &Scene, scale: f32, count: usize) -> Result<Vec<Placed
     let half = ctx.masked.len().div_ceil(2).max(2).min(ctx.masked.len());
     let fewest = 2.min(half);
     for need in [half, fewest] {
-        let candidates: Vec<Candidate> = SHRINK
+        let fits: Vec<Fit> = SHRINK
             .iter()
-            .flat_map(|&side| ctx.candidates(scale, side, need))
+            .flat_map(|&side| ctx.fitting(scale, side, need))
             .collect();
+        let candidates = ctx.scored(fits);
         if candidates.is_empty() {
             if need == fewest {
                 break;
@@ -297,15 +298,16 @@ const SMALLER_SIDE: f32 = 0.05;
 
 /// The candidates in order of preference (resemblance with the [`SMALLER_SIDE`] cost, then
 /// seen whole by more views, then nearer the object), taken greedily: each further one must
-/// lie clear of those chosen by twice their sizes and differ from each in appearance by
+/// lie at least twice their two half-sides from those chosen and differ from each in
+/// appearance by
 /// [`OTHER_SURFACE`].
 fn choose(mut candidates: Vec<Candidate>, count: usize) -> Vec<PlacedHole> {
-    let cost = |c: &Candidate| c.resemblance + SMALLER_SIDE * (1.0 - c.side);
+    let cost = |c: &Candidate| c.resemblance + SMALLER_SIDE * (1.0 - c.fit.side);
     candidates.sort_by(|a, b| {
         cost(a)
             .total_cmp(&cost(b))
-            .then(b.whole.cmp(&a.whole))
-            .then(a.to_object.total_cmp(&b.to_object))
+            .then(b.fit.whole.cmp(&a.fit.whole))
+            .then(a.fit.to_object.total_cmp(&b.fit.to_object))
     });
     let mut chosen: Vec<Candidate> = Vec::new();
     for c in candidates {
@@ -314,10 +316,11 @@ fn choose(mut candidates: Vec<Candidate>, count: usize) -> Vec<PlacedHole> {
         }
         let apart = chosen.iter().all(|o| {
             let d = (0..3)
-                .map(|i| (c.centre[i] - o.centre[i]).powi(2))
+                .map(|i| (c.fit.centre[i] - o.fit.centre[i]).powi(2))
                 .sum::<f32>()
                 .sqrt();
-            d >= 2.0 * (c.half + o.half) && c.appearance.distance(&o.appearance) >= OTHER_SURFACE
+            d >= 2.0 * (c.fit.half + o.fit.half)
+                && c.appearance.distance(&o.appearance) >= OTHER_SURFACE
         });
         if apart {
             chosen.push(c);
@@ -326,44 +329,46 @@ fn choose(mut candidates: Vec<Candidate>, count: usize) -> Vec<PlacedHole> {
     chosen
         .into_iter()
         .map(|c| PlacedHole {
-            hole: c.hole,
-            side: c.side,
+            hole: c.fit.hole,
+            side: c.fit.side,
             resemblance: c.resemblance,
             appearance: c.appearance,
-            whole_views: c.whole,
+            whole_views: c.fit.whole,
         })
         .collect()
 }
 
 /// What every try of [`place_holes`] reads, computed once: the training views, each one's
-/// mask as a summed-area table, the masked views' mask sides and colour statistics, the
-/// object's ring, the candidate surface points and the object's centre.
+/// mask as a summed-area table, the masked views' mask sides, the candidate surface points
+/// and the object's centre.
 struct Placement<'a> {
     train: Vec<&'a View>,
     /// Per training view, the summed-area table of its mask (`None`: no mask).
     integrals: Vec<Option<Vec<u32>>>,
     /// `(training view index, square root of its mask's area)` of the masked views.
     masked: Vec<(usize, f32)>,
-    /// The colour statistics of each masked view, in the order of `masked`.
-    stats: Vec<ViewStats>,
-    /// The ring just outside the object's mask, over the masked views.
-    ring: Option<Appearance>,
     points: Vec<[f32; 3]>,
     object: Option<[f32; 3]>,
 }
 
-/// A place that fits ([`Placement::fits`]), scored.
-struct Candidate {
+/// A place that fits ([`Placement::fits`]).
+struct Fit {
     hole: PseudoHole,
     half: f32,
     /// Its side as a fraction of the mask's (one of [`SHRINK`]).
     side: f32,
     centre: [f32; 3],
+    /// Masked views that see it whole.
     whole: usize,
-    appearance: Appearance,
-    resemblance: f32,
     /// Distance from the object's centre.
     to_object: f32,
+}
+
+/// A [`Fit`] with its ring's statistics and their distance to the object's ring.
+struct Candidate {
+    fit: Fit,
+    appearance: Appearance,
+    resemblance: f32,
 }
 
 impl<'a> Placement<'a> {
@@ -393,47 +398,57 @@ impl<'a> Placement<'a> {
             );
         }
         let object = object_centre(scene, &train);
-        let stats: Vec<ViewStats> = masked
-            .iter()
-            .map(|(k, _)| ViewStats::new(&train[*k].image, train[*k].mask.as_ref()))
-            .collect();
-        let ring = masked
-            .iter()
-            .zip(&stats)
-            .filter_map(|((k, side), st)| {
-                let width = ((MASK_MARGIN * side).round() as usize).max(2);
-                Some(st.ring(train[*k].mask.as_ref()?, width))
-            })
-            .fold(Sums::default(), |a, b| a.add(&b))
-            .appearance();
         Ok(Self {
             train,
             integrals,
             masked,
-            stats,
-            ring,
             points,
             object,
         })
     }
 
-    /// The statistics of the ring just outside `hole`'s image in the masked views.
-    fn ring_of(&self, hole: &PseudoHole) -> Option<Appearance> {
-        let mut sums = Sums::default();
-        for ((k, _), st) in self.masked.iter().zip(&self.stats) {
-            let Some(r) = hole.image_rect(&self.train[*k].camera) else {
+    /// `fits` with their rings' statistics (the ring just outside each one's image in the
+    /// masked views) and their distance to the object's ring; those whose ring no masked
+    /// view shows are left out. One masked view's statistics are held at a time.
+    fn scored(&self, fits: Vec<Fit>) -> Vec<Candidate> {
+        if fits.is_empty() {
+            return Vec::new();
+        }
+        let mut object = Sums::default();
+        let mut rings = vec![Sums::default(); fits.len()];
+        for (k, side) in &self.masked {
+            let view = self.train[*k];
+            let Some(mask) = view.mask.as_ref() else {
                 continue;
             };
-            let (mx, my) = (MASK_MARGIN * (r[2] - r[0]), MASK_MARGIN * (r[3] - r[1]));
-            let grown = st.rect([r[0] - mx, r[1] - my, r[2] + mx, r[3] + my]);
-            sums = sums.add(&grown.sub(&st.rect(r)));
+            let stats = ViewStats::new(&view.image, Some(mask));
+            object = object.add(&stats.ring(mask, ((MASK_MARGIN * side).round() as usize).max(2)));
+            for (fit, ring) in fits.iter().zip(&mut rings) {
+                let Some(r) = fit.hole.image_rect(&view.camera) else {
+                    continue;
+                };
+                let (mx, my) = (MASK_MARGIN * (r[2] - r[0]), MASK_MARGIN * (r[3] - r[1]));
+                let grown = stats.rect([r[0] - mx, r[1] - my, r[2] + mx, r[3] + my]);
+                *ring = ring.add(&grown.sub(&stats.rect(r)));
+            }
         }
-        sums.appearance()
+        let object = object.appearance();
+        fits.into_iter()
+            .zip(rings)
+            .filter_map(|(fit, ring)| {
+                let appearance = ring.appearance()?;
+                Some(Candidate {
+                    fit,
+                    appearance,
+                    resemblance: object.map_or(0.0, |o| o.distance(&appearance)),
+                })
+            })
+            .collect()
     }
 
     /// Every candidate centre's pseudo-hole at `side` of the mask's size (times `scale`)
-    /// that fits with at least `need` masked views seeing it whole, scored.
-    fn candidates(&self, scale: f32, side: f32, need: usize) -> Vec<Candidate> {
+    /// that fits with at least `need` masked views seeing it whole.
+    fn fitting(&self, scale: f32, side: f32, need: usize) -> Vec<Fit> {
         let stride = self.points.len().div_ceil(MAX_CANDIDATES).max(1);
         let mut out = Vec::new();
         for p in self.points.iter().step_by(stride) {
@@ -452,17 +467,12 @@ impl<'a> Placement<'a> {
             let Some(whole) = self.fits(&hole, need) else {
                 continue;
             };
-            let Some(appearance) = self.ring_of(&hole) else {
-                continue;
-            };
-            out.push(Candidate {
+            out.push(Fit {
                 hole,
                 half,
                 side,
                 centre: *p,
                 whole,
-                appearance,
-                resemblance: self.ring.map_or(0.0, |r| r.distance(&appearance)),
                 to_object: self.object.map_or(0.0, |o| {
                     (0..3).map(|i| (p[i] - o[i]).powi(2)).sum::<f32>().sqrt()
                 }),

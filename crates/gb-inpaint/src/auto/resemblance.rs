@@ -113,7 +113,8 @@ pub struct ViewStats {
 
 impl ViewStats {
     /// The tables of `image`, leaving out the pixels under `mask` (the object's) and every
-    /// neighbour difference that touches one.
+    /// neighbour difference that touches one. Each difference counts half at each of its two
+    /// pixels, so a rectangle's ring sees the pairs across all four of its edges alike.
     pub fn new(image: &RgbImage, mask: Option<&Mask>) -> Self {
         let (w, h) = (image.width, image.height);
         let out = |i: usize| mask.is_none_or(|m| !m.data[i]);
@@ -121,6 +122,26 @@ impl ViewStats {
             let p = &image.data[i * 3..i * 3 + 3];
             0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64
         };
+        // per pixel: half of each difference to the right and below, and half a pair each
+        let mut texture = vec![(0.0f64, 0.0f64); w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                if !out(i) {
+                    continue;
+                }
+                let right = (x + 1 < w).then_some(i + 1);
+                let below = (y + 1 < h).then_some(i + w);
+                for j in [right, below].into_iter().flatten().filter(|&j| out(j)) {
+                    let d = 0.5 * (luma(i) - luma(j)).abs();
+                    for k in [i, j] {
+                        texture[k].0 += d;
+                        texture[k].1 += 0.5;
+                    }
+                }
+            }
+        }
+        let at = |x: usize, y: usize| y * (w + 1) + x;
         let mut table = vec![[0.0f64; CHANNELS]; (w + 1) * (h + 1)];
         for y in 0..h {
             for x in 0..w {
@@ -133,18 +154,8 @@ impl ViewStats {
                         v[1 + c] = p;
                         v[4 + c] = p * p;
                     }
-                    let l = luma(i);
-                    for j in [(x + 1 < w).then_some(i + 1), (y + 1 < h).then_some(i + w)]
-                        .into_iter()
-                        .flatten()
-                    {
-                        if out(j) {
-                            v[7] += (l - luma(j)).abs();
-                            v[8] += 1.0;
-                        }
-                    }
+                    (v[7], v[8]) = texture[i];
                 }
-                let at = |x: usize, y: usize| y * (w + 1) + x;
                 let (up, left, diag) = (table[at(x + 1, y)], table[at(x, y + 1)], table[at(x, y)]);
                 table[at(x + 1, y + 1)] = std::array::from_fn(|k| v[k] + up[k] + left[k] - diag[k]);
             }
@@ -177,34 +188,30 @@ impl ViewStats {
     }
 
     /// The sums over the pixels within `width` pixels of `mask` (a square neighbourhood), not
-    /// under it: the ring just outside the object.
+    /// under it: the ring just outside the object. Linear in the image's size.
     pub fn ring(&self, mask: &Mask, width: usize) -> Sums {
         let (w, h) = (mask.width, mask.height);
-        let r = width as i64;
-        let mut sums = Sums::default();
-        // a pixel is in the ring when a masked pixel lies in its square: a row-wise then
-        // column-wise running dilation
-        let mut rows = vec![false; w * h];
+        // the mask's own summed-area table: a pixel is in the ring when its square holds a
+        // masked pixel
+        let mut count = vec![0u32; (w + 1) * (h + 1)];
         for y in 0..h {
             for x in 0..w {
-                let (lo, hi) = (
-                    (x as i64 - r).max(0) as usize,
-                    (x as i64 + r).min(w as i64 - 1) as usize,
-                );
-                rows[y * w + x] = (lo..=hi).any(|k| mask.data[y * w + k]);
+                count[(y + 1) * (w + 1) + x + 1] = mask.data[y * w + x] as u32
+                    + count[y * (w + 1) + x + 1]
+                    + count[(y + 1) * (w + 1) + x]
+                    - count[y * (w + 1) + x];
             }
         }
+        let mut sums = Sums::default();
         for y in 0..h {
             for x in 0..w {
-                let i = y * w + x;
-                if mask.data[i] {
+                if mask.data[y * w + x] {
                     continue;
                 }
-                let (lo, hi) = (
-                    (y as i64 - r).max(0) as usize,
-                    (y as i64 + r).min(h as i64 - 1) as usize,
-                );
-                if (lo..=hi).any(|k| rows[k * w + x]) {
+                let (x0, x1) = (x.saturating_sub(width), (x + width + 1).min(w));
+                let (y0, y1) = (y.saturating_sub(width), (y + width + 1).min(h));
+                let c = |x: usize, y: usize| count[y * (w + 1) + x];
+                if c(x1, y1) + c(x0, y0) - c(x0, y1) - c(x1, y0) > 0 {
                     let px = [x as f32, y as f32, x as f32 + 1.0, y as f32 + 1.0];
                     sums = sums.add(&self.rect(px));
                 }
