@@ -45,6 +45,20 @@ fn procedural(dir: &Path, name: &str, seed: &str) -> (PathBuf, Scene) {
     (d, scene)
 }
 
+/// The procedural scene `name` (seed 3) in `dir`, the small test preset, and the reference
+/// pair `VIEW.png=IMAGE` of its first masked training view with that view's exact
+/// object-free image.
+fn with_exact_reference(dir: &Path, name: &str) -> (Scene, PathBuf, String) {
+    let (d, scene) = procedural(dir, name, "3");
+    let preset = small_preset(dir, None);
+    let view = crate::reference::masked_view(&scene);
+    let pair = format!(
+        "{view}.png={}",
+        s(&d.join("clean").join(format!("{view}.png")))
+    );
+    (scene, preset, pair)
+}
+
 fn trained(
     scene: &Scene,
     preset: &Path,
@@ -93,13 +107,7 @@ fn the_geometry_term_holds_the_hidden_depth_under_an_exact_reference() {
     // trains in-process from the seeded device RNG (crate::DEVICE_RNG)
     let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
-    let (d, scene) = procedural(dir.path(), "stairs", "3");
-    let preset = small_preset(dir.path(), None);
-    let view = crate::reference::masked_view(&scene);
-    let pair = format!(
-        "{view}.png={}",
-        s(&d.join("clean").join(format!("{view}.png")))
-    );
+    let (scene, preset, pair) = with_exact_reference(dir.path(), "stairs");
     let none = MethodConfig::builtin("none").unwrap();
 
     // the built-in `none`'s table: depth_weight 1 through the guided crop
@@ -154,13 +162,7 @@ const WALL_WITHIN_5_PERCENT: f64 = 0.4;
 fn an_exact_reference_leaves_the_hidden_wall_at_its_true_depth() {
     let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
-    let (d, scene) = procedural(dir.path(), "wall", "3");
-    let preset = small_preset(dir.path(), None);
-    let view = crate::reference::masked_view(&scene);
-    let pair = format!(
-        "{view}.png={}",
-        s(&d.join("clean").join(format!("{view}.png")))
-    );
+    let (scene, preset, pair) = with_exact_reference(dir.path(), "wall");
     // the built-in `none`'s table: depth_weight 1 through the guided crop
     let none = MethodConfig::builtin("none").unwrap();
     let unguided = trained(&scene, &preset, none.clone(), |_| {});

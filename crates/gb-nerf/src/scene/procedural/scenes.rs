@@ -154,6 +154,17 @@ fn vase(
     ]
 }
 
+/// A palette colour drawn until its name differs from `other` (the object's against the
+/// surface it hides).
+fn colour_other_than(rng: &mut ChaCha8Rng, other: &str) -> (&'static str, Rgb) {
+    loop {
+        let c = PALETTE[rng.random_range(0..PALETTE.len())];
+        if c.0 != other {
+            return c;
+        }
+    }
+}
+
 fn jitter(rng: &mut ChaCha8Rng, c: Rgb, amount: f64) -> Rgb {
     let mut out = c;
     for v in &mut out {
@@ -394,12 +405,7 @@ fn alcove(rng: &mut ChaCha8Rng, s32: impl Fn(&mut ChaCha8Rng) -> u32) -> SceneSp
         },
     ));
     // the object: a vase standing on the recess's floor, in front of its back
-    let (cname, color) = loop {
-        let c = PALETTE[rng.random_range(0..PALETTE.len())];
-        if c.0 != tname {
-            break c;
-        }
-    };
+    let (cname, color) = colour_other_than(rng, tname);
     let x = rng.random_range(-0.08..0.08);
     let z = zb + 0.35;
     shapes.extend(vase(
@@ -455,12 +461,7 @@ fn wall(rng: &mut ChaCha8Rng, s32: impl Fn(&mut ChaCha8Rng) -> u32) -> SceneSpec
             seed: s32(rng),
         },
     );
-    let (cname, color) = loop {
-        let c = PALETTE[rng.random_range(0..PALETTE.len())];
-        if c.0 != bname {
-            break c;
-        }
-    };
+    let (cname, color) = colour_other_than(rng, bname);
     let mut shapes = vec![floor, bricks];
     let x = rng.random_range(-0.1..0.1);
     shapes.extend(vase(
