@@ -117,6 +117,6 @@ impl SdComponents {
 
     /// The prior's square input resolution (`unet.sample_size * factor`; 512 for SD 1.5).
     pub fn resolution(&self) -> usize {
-        self.unet_config.sample_size.unwrap_or(64) * self.vae_factor()
+        self.unet_config.native_resolution(self.vae_factor())
     }
 }

@@ -303,7 +303,7 @@ pub fn run_finetune(
     let done = trainer.step - first;
     let export = match cfg.target {
         TrainTarget::Lora => {
-            let path = opts.out.join("pytorch_lora_weights.safetensors");
+            let path = opts.out.join(gb_diffusion::lora::LORA_FILE_NAME);
             let n = trainer.export_lora(&path)?;
             tracing::info!(adapters = n, "LoRA written to {}", path.display());
             path

@@ -21,6 +21,7 @@
 //! The recipe is `configs/tiny-prior/recipe.toml` next to the diffusers config files of the
 //! networks; `cargo xtask finetune --synthetic --from-scratch` runs it.
 
+use gb_diffusion::lora::LORA_FILE_NAME;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
@@ -310,11 +311,8 @@ pub fn run_recipe(
     // assemble
     let prior = out.join("prior");
     copy_dir(&base_prior, &prior)?;
-    std::fs::copy(
-        lora_out.join("pytorch_lora_weights.safetensors"),
-        prior.join("pytorch_lora_weights.safetensors"),
-    )
-    .map_err(|e| FinetuneError::io(lora_out.join("pytorch_lora_weights.safetensors"), e))?;
+    std::fs::copy(lora_out.join(LORA_FILE_NAME), prior.join(LORA_FILE_NAME))
+        .map_err(|e| FinetuneError::io(lora_out.join(LORA_FILE_NAME), e))?;
     let n = vae_losses.len();
     let k = (n / 10).max(1);
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;

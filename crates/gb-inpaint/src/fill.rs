@@ -183,7 +183,7 @@ pub fn fill_view(
             })?
             .0;
     }
-    let r = prior.unet_config.sample_size.unwrap_or(64) * prior.vae_scale_factor;
+    let r = prior.unet_config.native_resolution(prior.vae_scale_factor);
     let geometry = CropGeometry::new(&full, opts.margin, r).ok_or_else(|| {
         view_error(
             view,

@@ -37,8 +37,7 @@ use serde::Serialize;
 use crate::error::InpaintError;
 use crate::method::MethodConfig;
 
-/// The LoRA file name a fine-tuned prior folder carries (diffusers' `save_lora_weights`).
-pub const LORA_FILE_NAME: &str = "pytorch_lora_weights.safetensors";
+pub use gb_diffusion::lora::LORA_FILE_NAME;
 
 /// The LoRA of a run: `explicit` (`--lora`) wins; else the prior's own file when the method
 /// uses one (an error when it is missing); else none.
@@ -192,7 +191,7 @@ impl GuidancePrior {
         }
         let parts = Parts {
             in_channels: loaded.unet_config.in_channels,
-            sample_size: loaded.unet_config.sample_size,
+            resolution: loaded.resolution(),
             factor: loaded.vae_factor(),
             prediction: loaded.scheduler.prediction_type,
             unet: loaded.unet,
@@ -234,7 +233,7 @@ impl GuidancePrior {
         let parts = Parts {
             unet: UNet2DConditionModel::new(unet, device),
             in_channels: unet.in_channels,
-            sample_size: unet.sample_size,
+            resolution: unet.native_resolution(vae.scale_factor()),
             vae: AutoencoderKL::new(vae, &device.clone().autodiff()),
             factor: vae.scale_factor(),
             text: ClipTextModel::new(text, device),
@@ -256,7 +255,8 @@ impl GuidancePrior {
 struct Parts {
     unet: UNet2DConditionModel,
     in_channels: usize,
-    sample_size: Option<usize>,
+    /// The native square resolution ([`UNet2DConditionConfig::native_resolution`]).
+    resolution: usize,
     /// On the autodiff device.
     vae: AutoencoderKL,
     factor: usize,
@@ -277,7 +277,7 @@ impl Parts {
         precision: Precision,
         device: &Device,
     ) -> GuidancePrior {
-        let resolution = self.sample_size.unwrap_or(64) * self.factor;
+        let resolution = self.resolution;
         GuidancePrior {
             info: PriorInfo {
                 folder,

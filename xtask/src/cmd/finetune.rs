@@ -215,7 +215,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return validate_only(&args, &base_dir, val.as_ref(), &plain);
     }
     let models = PriorModels::load(&base_dir, &device)?;
-    let native = models.unet_config.sample_size.unwrap_or(64) * models.vae_factor;
+    let native = models.unet_config.native_resolution(models.vae_factor);
     let cfg = config_of(&args, native)?;
     let summary = run_finetune(
         models,
@@ -248,13 +248,13 @@ fn validate_only(
             .with_context(|| format!("loading the prior {}", base_dir.display()))
     };
     let prior = load()?;
-    let native = prior.unet_config.sample_size.unwrap_or(64) * prior.vae_scale_factor;
+    let native = prior.unet_config.native_resolution(prior.vae_scale_factor);
     let mut cfg = config_of(args, native)?;
     if args.config.is_none() && args.validation_samples.is_none() {
         cfg.validation_samples = val.len();
     }
     let lora = args.lora.clone().or_else(|| {
-        let own = base_dir.join("pytorch_lora_weights.safetensors");
+        let own = base_dir.join(gb_diffusion::lora::LORA_FILE_NAME);
         own.is_file().then_some(own)
     });
     let mut settings = validation_settings(&cfg);

@@ -170,6 +170,12 @@ fn d_positional() -> String {
 }
 
 impl UNet2DConditionConfig {
+    /// The square image resolution the model was trained at: its latent `sample_size`
+    /// (64, SD 1.5's, when the config does not say) times the VAE's spatial factor.
+    pub fn native_resolution(&self, vae_factor: usize) -> usize {
+        self.sample_size.unwrap_or(64) * vae_factor
+    }
+
     /// Reads `config.json` and checks that this implementation supports it.
     pub fn from_file(path: &std::path::Path) -> Result<Self, ConfigError> {
         let cfg: Self = super::read_json_config(path)?;

@@ -14,6 +14,9 @@ pub mod tensor_io;
 pub mod write;
 
 pub use apply::{apply_lora, merge_lora, LoraComponent};
+
+/// The LoRA file name a fine-tuned prior folder carries (diffusers' `save_lora_weights`).
+pub const LORA_FILE_NAME: &str = "pytorch_lora_weights.safetensors";
 pub use conv_adapter::ConvLoraAdapter;
 pub use error::LoraError;
 pub use file::{LoraEntry, LoraFile};
