@@ -433,6 +433,18 @@ fn a_run_with_a_reference_records_it_and_export_none_writes_no_export() {
         Path::new(image).is_absolute() && Path::new(image).is_file(),
         "{pair}"
     );
+    // the reference is held by the geometry term, after an unguided pass; resuming the
+    // finished run makes no second one, and scores the same field
+    assert!(summary.unguided_seconds.is_some());
+    let again = gb_inpaint::run::run(&gb_inpaint::RunSpec {
+        resume: true,
+        ..spec
+    })
+    .unwrap();
+    assert_eq!(again.unguided_seconds, None);
+    assert_eq!(again.steps, 3);
+    assert_eq!(again.mean.ssim_bbox, summary.mean.ssim_bbox);
+    assert_eq!(again.mean.d_psnr, summary.mean.d_psnr);
 }
 
 /// `--reference auto`: the run fills the middle masked training view by `fsr` into OUT, uses

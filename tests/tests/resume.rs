@@ -26,6 +26,7 @@ use serde_json::Value;
 /// field must be equal bit for bit.
 const WALL_TIME_FIELDS: &[&str] = &[
     "train_seconds_this_run",
+    "unguided_seconds",
     "render_seconds",
     "eval_seconds",
     "seconds_per_guided_step",

@@ -337,7 +337,16 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     if method.geometry.enabled() && !holds_geometry {
         tracing::info!("geometry: no term inside the mask to hold against, so no unguided pass");
     }
-    let hidden_depth = if holds_geometry {
+    // a finished checkpoint trains no more: its targets would go unused
+    let finished = resuming && {
+        let step = gb_nerf::train::checkpoint::load(&ckpt)?.meta.step;
+        step >= config.train.steps
+    };
+    if holds_geometry && finished {
+        tracing::info!("geometry: the checkpoint is finished, so no unguided pass");
+    }
+    let unguided_start = Instant::now();
+    let hidden_depth = if holds_geometry && !finished {
         Some(unguided_depth(
             &scene,
             &config,
@@ -348,6 +357,9 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     } else {
         None
     };
+    let unguided_seconds = hidden_depth
+        .as_ref()
+        .map(|_| unguided_start.elapsed().as_secs_f64());
     let guidance = prior.map(|p| (p, prompts.clone()));
     let mut trainer = if resuming {
         tracing::info!(path = %ckpt.display(), "resuming");
@@ -465,6 +477,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         device: device.name().to_string(),
         steps: trainer.step,
         train_seconds_this_run: fit.seconds,
+        unguided_seconds,
         render_seconds,
         eval_seconds,
         export,

@@ -118,6 +118,11 @@ pub struct RunSummary {
     pub steps: usize,
     /// Wall time of this process's training, s.
     pub train_seconds_this_run: f64,
+    /// Wall time of the geometry term's unguided pass ([`crate::geometry`]), s; absent when
+    /// this run made none (no term, nothing inside the mask to hold, or a finished
+    /// checkpoint resumed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unguided_seconds: Option<f64>,
     /// Wall time of the test-view renders, s.
     pub render_seconds: f64,
     /// Wall time of the metrics, s.
