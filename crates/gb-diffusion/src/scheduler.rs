@@ -49,6 +49,19 @@ pub struct DdimScheduler {
     pub num_inference_steps: usize,
 }
 
+/// `alphas_cumprod` of a scheduler config: the running product of `1 - beta` over
+/// [`betas`] (diffusers' `alphas_cumprod`).
+pub fn alphas_cumprod(cfg: &SchedulerConfig) -> Vec<f64> {
+    let mut acc = 1.0;
+    betas(cfg)
+        .into_iter()
+        .map(|b| {
+            acc *= 1.0 - b;
+            acc
+        })
+        .collect()
+}
+
 /// `N` betas of the configured schedule, as diffusers computes them.
 pub fn betas(cfg: &SchedulerConfig) -> Vec<f64> {
     let n = cfg.num_train_timesteps;
@@ -72,14 +85,7 @@ pub fn betas(cfg: &SchedulerConfig) -> Vec<f64> {
 impl DdimScheduler {
     /// The schedule of `config` (no inference timesteps yet).
     pub fn new(config: SchedulerConfig) -> Self {
-        let mut acc = 1.0;
-        let alphas_cumprod: Vec<f64> = betas(&config)
-            .into_iter()
-            .map(|b| {
-                acc *= 1.0 - b;
-                acc
-            })
-            .collect();
+        let alphas_cumprod = alphas_cumprod(&config);
         let final_alpha_cumprod = if config.set_alpha_to_one {
             1.0
         } else {

@@ -14,7 +14,7 @@ use gb_diffusion::config::{
 use gb_diffusion::lora::LoraFile;
 use gb_diffusion::models::{AutoencoderKL, UNet2DConditionModel};
 use gb_diffusion::pipeline::SdComponents;
-use gb_diffusion::scheduler::betas;
+use gb_diffusion::scheduler::alphas_cumprod;
 use gb_diffusion::tokenizer::ClipTokenizer;
 
 use crate::FinetuneError;
@@ -104,18 +104,6 @@ fn check_inpainting(
             2 * latent_channels + 1
         ),
     })
-}
-
-/// `alphas_cumprod` of a scheduler config.
-pub fn alphas_cumprod(cfg: &SchedulerConfig) -> Vec<f64> {
-    let mut acc = 1.0;
-    betas(cfg)
-        .into_iter()
-        .map(|b| {
-            acc *= 1.0 - b;
-            acc
-        })
-        .collect()
 }
 
 fn scheduler_of(root: &Path) -> Result<SchedulerConfig, FinetuneError> {
