@@ -283,22 +283,12 @@ impl Lpips {
 
     /// LPIPS distance between `pred` and `gt` (lower is better; 0 for identical images).
     pub fn distance(&self, pred: &RgbImage, gt: &RgbImage) -> Result<f64, MetricError> {
-        check_pair(pred, gt)?;
         let min = self.net.backbone.min_side();
-        if pred.width < min || pred.height < min {
-            return Err(MetricError::TooSmall {
-                metric: self.net.backbone.name(),
-                min,
-                width: pred.width,
-                height: pred.height,
-            });
-        }
-        let d = self.net.forward(
-            image_tensor(pred, &self.device),
-            image_tensor(gt, &self.device),
-        );
-        let v: f32 = d.into_scalar();
-        Ok(f64::from(v))
+        let fits = |w: usize, h: usize| w >= min && h >= min;
+        let too_small = (self.net.backbone.name(), min);
+        pair_distance(pred, gt, &self.device, fits, too_small, |p, g| {
+            self.net.forward(p, g)
+        })
     }
 
     /// LPIPS over the crop with columns `x0..x1` and rows `y0..y1` (ends exclusive).
@@ -306,10 +296,46 @@ impl Lpips {
         &self,
         pred: &RgbImage,
         gt: &RgbImage,
-        (x0, y0, x1, y1): (usize, usize, usize, usize),
+        bbox: (usize, usize, usize, usize),
     ) -> Result<f64, MetricError> {
-        check_pair(pred, gt)?;
-        check_bbox(x0, y0, x1, y1, pred.width, pred.height)?;
-        self.distance(&crop(pred, x0, y0, x1, y1), &crop(gt, x0, y0, x1, y1))
+        box_distance(pred, gt, bbox, |p, g| self.distance(p, g))
     }
+}
+
+/// The distance of a perceptual network (LPIPS, ST-LPIPS) between two images of one size:
+/// refused with [`MetricError::TooSmall`] (`too_small`: the metric's name and smallest side)
+/// unless `fits(width, height)`, else `forward` on their tensors on `device`.
+pub(crate) fn pair_distance(
+    pred: &RgbImage,
+    gt: &RgbImage,
+    device: &Device,
+    fits: impl Fn(usize, usize) -> bool,
+    (metric, min): (&'static str, usize),
+    forward: impl Fn(Tensor<4>, Tensor<4>) -> Tensor<1>,
+) -> Result<f64, MetricError> {
+    check_pair(pred, gt)?;
+    if !fits(pred.width, pred.height) {
+        return Err(MetricError::TooSmall {
+            metric,
+            min,
+            width: pred.width,
+            height: pred.height,
+        });
+    }
+    let d = forward(image_tensor(pred, device), image_tensor(gt, device));
+    let v: f32 = d.into_scalar();
+    Ok(f64::from(v))
+}
+
+/// `distance` over the crop with columns `x0..x1` and rows `y0..y1` (ends exclusive) of two
+/// images of one size.
+pub(crate) fn box_distance(
+    pred: &RgbImage,
+    gt: &RgbImage,
+    (x0, y0, x1, y1): (usize, usize, usize, usize),
+    distance: impl Fn(&RgbImage, &RgbImage) -> Result<f64, MetricError>,
+) -> Result<f64, MetricError> {
+    check_pair(pred, gt)?;
+    check_bbox(x0, y0, x1, y1, pred.width, pred.height)?;
+    distance(&crop(pred, x0, y0, x1, y1), &crop(gt, x0, y0, x1, y1))
 }

@@ -32,8 +32,7 @@ use burn::tensor::{Device, Tensor};
 use gb_core::RgbImage;
 
 use crate::error::MetricError;
-use crate::image_metrics::check_pair;
-use crate::lpips::{distance_from_features, image_tensor};
+use crate::lpips::{box_distance, distance_from_features, pair_distance};
 
 /// Channels of the five AlexNet feature maps LPIPS compares.
 const CHANNELS: [usize; 5] = [64, 192, 384, 256, 256];
@@ -231,21 +230,15 @@ impl StLpips {
 
     /// ST-LPIPS distance between `pred` and `gt` (lower is better; 0 for identical images).
     pub fn distance(&self, pred: &RgbImage, gt: &RgbImage) -> Result<f64, MetricError> {
-        check_pair(pred, gt)?;
-        if !side_is_valid(pred.width) || !side_is_valid(pred.height) {
-            return Err(MetricError::TooSmall {
-                metric: "ST-LPIPS",
-                min: MIN_SIDE,
-                width: pred.width,
-                height: pred.height,
-            });
-        }
-        let d = self.net.forward(
-            image_tensor(pred, &self.device),
-            image_tensor(gt, &self.device),
-        );
-        let v: f32 = d.into_scalar();
-        Ok(f64::from(v))
+        let fits = |w: usize, h: usize| side_is_valid(w) && side_is_valid(h);
+        pair_distance(
+            pred,
+            gt,
+            &self.device,
+            fits,
+            ("ST-LPIPS", MIN_SIDE),
+            |p, g| self.net.forward(p, g),
+        )
     }
 
     /// ST-LPIPS over the crop with columns `x0..x1` and rows `y0..y1` (ends exclusive).
@@ -253,11 +246,9 @@ impl StLpips {
         &self,
         pred: &RgbImage,
         gt: &RgbImage,
-        (x0, y0, x1, y1): (usize, usize, usize, usize),
+        bbox: (usize, usize, usize, usize),
     ) -> Result<f64, MetricError> {
-        check_pair(pred, gt)?;
-        crate::image_metrics::check_bbox(x0, y0, x1, y1, pred.width, pred.height)?;
-        self.distance(&crop(pred, x0, y0, x1, y1), &crop(gt, x0, y0, x1, y1))
+        box_distance(pred, gt, bbox, |p, g| self.distance(p, g))
     }
 }
 
