@@ -56,10 +56,9 @@ fn write_feature_masks(
     Ok(written)
 }
 
-/// The size of an image file.
+/// The size of an image file, from its header.
 pub(crate) fn image_size(path: &Path) -> Result<(usize, usize), CaptureError> {
-    let (w, h, _) = gb_core::read_gray(path)?;
-    Ok((w, h))
+    Ok(gb_core::image_size(path)?)
 }
 
 /// Runs `colmap STAGE ARGS`, its output to `work/STAGE.log`.

@@ -80,15 +80,21 @@ pub fn write_scene(
             report.left_out.push(name);
             continue;
         };
+        let bad_model = |reason: String| gb_nerf::scene::SceneError::Colmap {
+            path: out.join("colmap/sparse"),
+            reason,
+        };
         let camera = model.cameras.get(&image.camera_id).ok_or_else(|| {
-            gb_nerf::scene::SceneError::Colmap {
-                path: out.join("colmap/sparse"),
-                reason: format!(
-                    "image {name} names camera {} which is not in the model",
-                    image.camera_id
-                ),
-            }
+            bad_model(format!(
+                "image {name} names camera {} which is not in the model",
+                image.camera_id
+            ))
         })?;
+        // SIMPLE_PINHOLE's first parameter is its focal length
+        let focal =
+            camera.params.first().copied().ok_or_else(|| {
+                bad_model(format!("camera {} has no parameters", image.camera_id))
+            })?;
         let dst = image_dir.join(&name);
         std::fs::copy(path, &dst).map_err(|e| CaptureError::io(&dst, e))?;
         if let Some(mask) = mask {
@@ -106,7 +112,7 @@ pub fn write_scene(
             c2w: opengl_c2w(image),
             height: camera.height as f64,
             width: camera.width as f64,
-            focal: camera.params.first().copied().unwrap_or(0.0),
+            focal,
             near,
             far,
         }));

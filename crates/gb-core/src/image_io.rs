@@ -111,6 +111,15 @@ pub fn read_rgb(path: &Path, background: Option<[f32; 3]>) -> Result<RgbImage, I
     })
 }
 
+/// The `(width, height)` of an image file, from its header alone (no decoding).
+pub fn image_size(path: &Path) -> Result<(usize, usize), ImageIoError> {
+    let (w, h) = image::image_dimensions(path).map_err(|error| ImageIoError::Read {
+        path: path.to_path_buf(),
+        error,
+    })?;
+    Ok((w as usize, h as usize))
+}
+
 /// Reads a single-channel image (e.g. a mask); returns `(width, height, values)` with
 /// 8-bit values divided by 255 and 16-bit values by 65535.
 pub fn read_gray(path: &Path) -> Result<(usize, usize, Vec<f32>), ImageIoError> {

@@ -24,7 +24,9 @@ pub mod testdata;
 pub use assets::{assets_dir, tiny_prior_dir};
 pub use atomic::write_atomic;
 pub use backend::{heavy_test_backends, test_backends, BackendKind};
-pub use image_io::{read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage};
+pub use image_io::{
+    image_size, read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage,
+};
 pub use indexing::gather_rows;
 pub use npy_guard::check_npy_header;
 pub use precision::{Precision, PrecisionError};

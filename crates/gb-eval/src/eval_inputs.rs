@@ -292,16 +292,7 @@ fn check_count(
 }
 
 fn check_same_size(a: &Path, b: &Path) -> Result<(), InputError> {
-    let dims = |p: &Path| {
-        image::image_dimensions(p)
-            .map(|(w, h)| (w as usize, h as usize))
-            .map_err(|error| {
-                InputError::Image(ImageIoError::Read {
-                    path: p.to_path_buf(),
-                    error,
-                })
-            })
-    };
+    let dims = |p: &Path| gb_core::image_size(p).map_err(InputError::Image);
     let (da, db) = (dims(a)?, dims(b)?);
     if da != db {
         return Err(size_mismatch(a, da, b, db));

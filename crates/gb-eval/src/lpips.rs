@@ -283,12 +283,10 @@ impl Lpips {
 
     /// LPIPS distance between `pred` and `gt` (lower is better; 0 for identical images).
     pub fn distance(&self, pred: &RgbImage, gt: &RgbImage) -> Result<f64, MetricError> {
-        let min = self.net.backbone.min_side();
-        let fits = |w: usize, h: usize| w >= min && h >= min;
-        let too_small = (self.net.backbone.name(), min);
-        pair_distance(pred, gt, &self.device, fits, too_small, |p, g| {
-            self.net.forward(p, g)
-        })
+        let (name, min) = (self.net.backbone.name(), self.net.backbone.min_side());
+        let check =
+            |img: &RgbImage| size_check(img, name, min, img.width >= min && img.height >= min);
+        pair_distance(pred, gt, &self.device, check, |p, g| self.net.forward(p, g))
     }
 
     /// LPIPS over the crop with columns `x0..x1` and rows `y0..y1` (ends exclusive).
@@ -302,29 +300,38 @@ impl Lpips {
     }
 }
 
-/// The distance of a perceptual network (LPIPS, ST-LPIPS) between two images of one size:
-/// refused with [`MetricError::TooSmall`] (`too_small`: the metric's name and smallest side)
-/// unless `fits(width, height)`, else `forward` on their tensors on `device`.
+/// The distance of a perceptual network (LPIPS, ST-LPIPS) between two images of one size,
+/// after `check` (the network's size limit), by `forward` on their tensors on `device`.
 pub(crate) fn pair_distance(
     pred: &RgbImage,
     gt: &RgbImage,
     device: &Device,
-    fits: impl Fn(usize, usize) -> bool,
-    (metric, min): (&'static str, usize),
+    check: impl Fn(&RgbImage) -> Result<(), MetricError>,
     forward: impl Fn(Tensor<4>, Tensor<4>) -> Tensor<1>,
 ) -> Result<f64, MetricError> {
     check_pair(pred, gt)?;
-    if !fits(pred.width, pred.height) {
-        return Err(MetricError::TooSmall {
-            metric,
-            min,
-            width: pred.width,
-            height: pred.height,
-        });
-    }
+    check(pred)?;
     let d = forward(image_tensor(pred, device), image_tensor(gt, device));
     let v: f32 = d.into_scalar();
     Ok(f64::from(v))
+}
+
+/// [`MetricError::TooSmall`] for `metric` (smallest side `min`) unless `fits` holds for `img`.
+pub(crate) fn size_check(
+    img: &RgbImage,
+    metric: &'static str,
+    min: usize,
+    fits: bool,
+) -> Result<(), MetricError> {
+    if fits {
+        return Ok(());
+    }
+    Err(MetricError::TooSmall {
+        metric,
+        min,
+        width: img.width,
+        height: img.height,
+    })
 }
 
 /// `distance` over the crop with columns `x0..x1` and rows `y0..y1` (ends exclusive) of two

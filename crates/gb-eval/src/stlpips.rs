@@ -32,7 +32,7 @@ use burn::tensor::{Device, Tensor};
 use gb_core::RgbImage;
 
 use crate::error::MetricError;
-use crate::lpips::{box_distance, distance_from_features, pair_distance};
+use crate::lpips::{box_distance, distance_from_features, pair_distance, size_check};
 
 /// Channels of the five AlexNet feature maps LPIPS compares.
 const CHANNELS: [usize; 5] = [64, 192, 384, 256, 256];
@@ -230,15 +230,11 @@ impl StLpips {
 
     /// ST-LPIPS distance between `pred` and `gt` (lower is better; 0 for identical images).
     pub fn distance(&self, pred: &RgbImage, gt: &RgbImage) -> Result<f64, MetricError> {
-        let fits = |w: usize, h: usize| side_is_valid(w) && side_is_valid(h);
-        pair_distance(
-            pred,
-            gt,
-            &self.device,
-            fits,
-            ("ST-LPIPS", MIN_SIDE),
-            |p, g| self.net.forward(p, g),
-        )
+        let check = |img: &RgbImage| {
+            let fits = side_is_valid(img.width) && side_is_valid(img.height);
+            size_check(img, "ST-LPIPS", MIN_SIDE, fits)
+        };
+        pair_distance(pred, gt, &self.device, check, |p, g| self.net.forward(p, g))
     }
 
     /// ST-LPIPS over the crop with columns `x0..x1` and rows `y0..y1` (ends exclusive).

@@ -446,19 +446,21 @@ impl GuidedTrainer {
         Self::from_base(nerf, scene, MethodConfig::builtin("none")?, None)
     }
 
-    /// The strict resume of `cargo xtask inpaint --resume`: like [`Self::resume`], training
-    /// with `config`, but a checkpoint written with another preset (any field but
-    /// `train.steps` and `train.checkpoint_every`), method, prompts or prior is refused with
-    /// one line naming the file and the first field that differs.
+    /// The strict resume of `cargo xtask inpaint --resume` from `parts`, the checkpoint read
+    /// from `path` ([`checkpoint::load`]): like [`Self::resume`], training with `config`, but
+    /// a checkpoint written with another preset (any field but `train.steps` and
+    /// `train.checkpoint_every`), method, prompts or prior is refused with one line naming
+    /// the file and the first field that differs.
+    #[allow(clippy::too_many_arguments)]
     pub fn resume_matching(
         scene: &Scene,
         path: &Path,
+        parts: CheckpointParts,
         method: MethodConfig,
         guidance: Option<(GuidancePrior, Prompts)>,
         backend: BackendKind,
         config: NerfConfig,
     ) -> Result<Self, InpaintError> {
-        let parts = checkpoint::load(path)?;
         resume::check_preset(path, &parts.meta.config(path)?, &config)?;
         Self::resume_parts(scene, path, parts, config, method, guidance, backend, true)
     }

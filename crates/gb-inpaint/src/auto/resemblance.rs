@@ -187,37 +187,18 @@ impl ViewStats {
         Sums::from_slice(&std::array::from_fn(|k| a[k] + b[k] - c[k] - d[k]))
     }
 
-    /// The sums over the pixels within `width` pixels of `mask` (a square neighbourhood), not
-    /// under it: the ring just outside the object. Linear in the image's size.
+    /// The sums over the pixels within `width` pixels of `mask` (a square neighbourhood,
+    /// [`gb_nerf::scene::masks::dilate`]), not under it: the ring just outside the object.
     pub fn ring(&self, mask: &Mask, width: usize) -> Sums {
-        let (w, h) = (mask.width, mask.height);
-        // the mask's own summed-area table: a pixel is in the ring when its square holds a
-        // masked pixel
-        let mut count = vec![0u32; (w + 1) * (h + 1)];
-        for y in 0..h {
-            for x in 0..w {
-                count[(y + 1) * (w + 1) + x + 1] = mask.data[y * w + x] as u32
-                    + count[y * (w + 1) + x + 1]
-                    + count[(y + 1) * (w + 1) + x]
-                    - count[y * (w + 1) + x];
-            }
-        }
-        let mut sums = Sums::default();
-        for y in 0..h {
-            for x in 0..w {
-                if mask.data[y * w + x] {
-                    continue;
-                }
-                let (x0, x1) = (x.saturating_sub(width), (x + width + 1).min(w));
-                let (y0, y1) = (y.saturating_sub(width), (y + width + 1).min(h));
-                let c = |x: usize, y: usize| count[y * (w + 1) + x];
-                if c(x1, y1) + c(x0, y0) - c(x0, y1) - c(x1, y0) > 0 {
-                    let px = [x as f32, y as f32, x as f32 + 1.0, y as f32 + 1.0];
-                    sums = sums.add(&self.rect(px));
-                }
-            }
-        }
-        sums
+        let grown = gb_nerf::scene::masks::dilate(mask, width);
+        let w = mask.width;
+        (0..w * mask.height)
+            .filter(|&i| grown.data[i] && !mask.data[i])
+            .map(|i| {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                self.rect([x, y, x + 1.0, y + 1.0])
+            })
+            .fold(Sums::default(), |a, b| a.add(&b))
     }
 }
 

@@ -5,7 +5,6 @@
 use std::path::{Path, PathBuf};
 
 use gb_core::BackendKind;
-use gb_nerf::scene::LoadOptions;
 
 use crate::error::InpaintError;
 use crate::export::{write_export, ExportInfo};
@@ -40,14 +39,7 @@ pub fn export_run(
     let scene_dir = recorded.scene;
     let device = device.unwrap_or(recorded.device);
     let method = super::load_method(&config.display().to_string())?;
-    let (_, mut scene) =
-        gb_nerf::scene::load(&scene_dir, &LoadOptions::default()).map_err(|source| {
-            InpaintError::Scene {
-                what: "loading scene",
-                path: scene_dir.clone(),
-                source: Box::new(source),
-            }
-        })?;
+    let mut scene = super::setup::load_scene(&scene_dir)?;
     if method.pre_inpainted {
         crate::pre_inpainted::apply(&mut scene, &scene_dir)?;
     }

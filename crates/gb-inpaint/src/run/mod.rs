@@ -326,7 +326,16 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     };
     let prior_info = prior.as_ref().map(|p| p.info.clone());
     let ckpt = out.join("checkpoint.bin");
-    let resuming = spec.resume && ckpt.is_file();
+    // read once: its step decides the unguided pass, its state the trainer
+    let resumed = if spec.resume && ckpt.is_file() {
+        let parts = gb_nerf::train::checkpoint::load(&ckpt)?;
+        // another preset is refused before any training (the unguided pass below)
+        crate::resume::check_preset(&ckpt, &parts.meta.config(&ckpt)?, &config)?;
+        Some(parts)
+    } else {
+        None
+    };
+    let resuming = resumed.is_some();
     if spec.resume && !resuming {
         tracing::warn!(
             "--resume: no checkpoint at {}, so the run starts afresh",
@@ -338,34 +347,33 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         tracing::info!("geometry: no term inside the mask to hold against, so no unguided pass");
     }
     // a finished checkpoint trains no more: its targets would go unused
-    let finished = resuming && {
-        let step = gb_nerf::train::checkpoint::load(&ckpt)?.meta.step;
-        step >= config.train.steps
-    };
+    let finished = resumed
+        .as_ref()
+        .is_some_and(|parts| parts.meta.step >= config.train.steps);
     if holds_geometry && finished {
         tracing::info!("geometry: the checkpoint is finished, so no unguided pass");
     }
-    let unguided_start = Instant::now();
-    let hidden_depth = if holds_geometry && !finished {
-        Some(unguided_depth(
-            &scene,
-            &config,
-            &method,
-            device,
-            spec.progress,
-        )?)
+    let (hidden_depth, unguided_seconds) = if holds_geometry && !finished {
+        let (targets, seconds) = unguided_depth(&scene, &config, &method, device, spec.progress)?;
+        (Some(targets), Some(seconds))
     } else {
-        None
+        (None, None)
     };
-    let unguided_seconds = hidden_depth
-        .as_ref()
-        .map(|_| unguided_start.elapsed().as_secs_f64());
     let guidance = prior.map(|p| (p, prompts.clone()));
-    let mut trainer = if resuming {
-        tracing::info!(path = %ckpt.display(), "resuming");
-        GuidedTrainer::resume_matching(&scene, &ckpt, method.clone(), guidance, device, config)?
-    } else {
-        GuidedTrainer::new(&scene, config, method.clone(), guidance, device)?
+    let mut trainer = match resumed {
+        Some(parts) => {
+            tracing::info!(path = %ckpt.display(), "resuming");
+            GuidedTrainer::resume_matching(
+                &scene,
+                &ckpt,
+                parts,
+                method.clone(),
+                guidance,
+                device,
+                config,
+            )?
+        }
+        None => GuidedTrainer::new(&scene, config, method.clone(), guidance, device)?,
     };
     if !references.is_empty() {
         tracing::info!(
@@ -528,14 +536,15 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
 
 /// The geometry term's targets ([`crate::geometry`]): trains the field of `config` without
 /// any hidden-region term (the `none` method; the same seed, so the same initialisation and
-/// rays as `--method none`) and renders its depth through the hidden pixels.
+/// rays as `--method none`) and renders its depth through the hidden pixels. Returns them
+/// with the pass's wall time.
 fn unguided_depth(
     scene: &gb_nerf::scene::Scene,
     config: &gb_nerf::train::NerfConfig,
     method: &crate::MethodConfig,
     device: gb_core::BackendKind,
     progress: bool,
-) -> Result<crate::geometry::HiddenDepth, InpaintError> {
+) -> Result<(crate::geometry::HiddenDepth, f64), InpaintError> {
     let start = Instant::now();
     let none = crate::MethodConfig::builtin("none")?;
     let mut unguided = GuidedTrainer::new(scene, config.clone(), none, None, device)?;
@@ -550,11 +559,12 @@ fn unguided_depth(
         method.geometry.clone(),
         method.crop_margin,
     )?;
+    let seconds = start.elapsed().as_secs_f64();
     tracing::info!(
         pixels = targets.pixels.len(),
         region = ?method.geometry.region,
-        seconds = start.elapsed().as_secs_f64(),
+        seconds,
         "geometry: the unguided field's depth through the held pixels"
     );
-    Ok(targets)
+    Ok((targets, seconds))
 }

@@ -91,17 +91,23 @@ pub fn load_or_generate(spec: &RunSpec) -> Result<(PathBuf, Scene), InpaintError
             dir
         }
     };
-    let (_, scene) = gb_nerf::scene::load(&dir, &LoadOptions::default()).map_err(|source| {
+    let scene = load_scene(&dir)?;
+    Ok((dir, scene))
+}
+
+/// Loads the scene folder `dir` as a run does (no normalisation), its warnings logged.
+pub(crate) fn load_scene(dir: &Path) -> Result<Scene, InpaintError> {
+    let (_, scene) = gb_nerf::scene::load(dir, &LoadOptions::default()).map_err(|source| {
         InpaintError::Scene {
             what: "loading scene",
-            path: dir.clone(),
+            path: dir.to_path_buf(),
             source: Box::new(source),
         }
     })?;
     for w in &scene.warnings {
         tracing::warn!("{w}");
     }
-    Ok((dir, scene))
+    Ok(scene)
 }
 
 /// Errors when no training view has a non-empty mask, or when a training view's mask covers
