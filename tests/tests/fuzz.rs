@@ -1,7 +1,7 @@
 //! The reader properties of `gb_tests::fuzz` with few cases (64 per reader, or
-//! `GB_FUZZ_CASES`); `cargo xtask fuzz` runs the same properties with 10 000 cases each.
+//! `GB_FUZZ_CASES`); `cargo xtask-fuzz` runs the same properties with 10 000 cases each.
 //! A failure prints the minimal failing input and `GB_FUZZ_SEED` to reproduce it. The tests
-//! use a fixed seed unless `GB_FUZZ_SEED` is set, so CI is repeatable; `cargo xtask fuzz`
+//! use a fixed seed unless `GB_FUZZ_SEED` is set, so CI is repeatable; `cargo xtask-fuzz`
 //! draws a new seed per run.
 
 use gb_tests::fuzz::{cases_from_env, readers, run_reader, DEFAULT_TEST_CASES};

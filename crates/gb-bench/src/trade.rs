@@ -16,9 +16,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use gb_core::BackendKind;
-use gb_inpaint::svg::{self, LineChart, Series};
 use gb_nerf::scene::procedural::SceneName;
 use gb_nerf::train::DepthSupervision;
+use gb_report::svg::{self, LineChart, Series};
 use serde_json::{json, Value};
 
 /// Arguments of `cargo xtask bench trade`.

@@ -1,6 +1,6 @@
 //! Shared plumbing used by every gb-nerf-rs crate: run-time backend selection
 //! ([`backend`]), crash-safe file writes ([`atomic`]), PNG/JPEG image IO ([`image_io`]),
-//! progress bars that do not fight the log ([`progress`]), one-line error messages
+//! `.npy` reading and writing ([`npy`]), progress bars that do not fight the log ([`progress`]), one-line error messages
 //! ([`messages`]), the prior's float precision ([`precision`]), row lookups with a parallel
 //! backward ([`indexing`]), content fingerprints for caches ([`fingerprint`]) and, with the `clap` feature, the command lines' value parsers
 //! (`cli`).
@@ -14,6 +14,7 @@ pub mod fingerprint;
 pub mod image_io;
 pub mod indexing;
 pub mod messages;
+pub mod npy;
 pub mod npy_guard;
 pub mod precision;
 pub mod progress;

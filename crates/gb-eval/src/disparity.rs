@@ -92,49 +92,22 @@ pub fn read_disparity(path: &Path, kind: DepthKind) -> Result<ScalarMap, Dispari
 }
 
 fn read_npy(bytes: &[u8]) -> Result<ScalarMap, String> {
-    gb_core::check_npy_header(bytes)?;
-    let npy = npyz::NpyFile::new(bytes).map_err(|e| e.to_string())?;
-    let shape: Vec<usize> = npy.shape().iter().map(|&s| s as usize).collect();
-    let fortran = matches!(npy.order(), npyz::Order::Fortran);
-    let (height, width) = match shape.as_slice() {
-        [h, w] | [h, w, 1] => (*h, *w),
+    let npy = gb_core::npy::read_npy(bytes).map_err(|e| e.to_string())?;
+    let (height, width) = match npy.shape.as_slice() {
+        [h, w] | [h, w, 1] => (*h as usize, *w as usize),
         other => {
             return Err(format!(
                 "expected shape [h, w] or [h, w, 1], found {other:?}"
             ))
         }
     };
-    let dtype = match npy.dtype() {
-        npyz::DType::Plain(ts) => ts.to_string(),
-        other => other.descr(),
-    };
-    let values: Vec<f32> = match dtype.as_str() {
-        "<f4" | ">f4" => npy.into_vec::<f32>().map_err(|e| e.to_string())?,
-        "<f8" | ">f8" => npy
-            .into_vec::<f64>()
-            .map_err(|e| e.to_string())?
-            .into_iter()
-            .map(|v| v as f32)
-            .collect(),
-        other => {
-            return Err(format!(
-                "expected float32 or float64 values, found dtype {other}"
-            ))
-        }
-    };
-    // A map with one row or one column reads the same in both orders, and an empty one has
-    // nothing to reorder (its other side may be huge: no loop over it).
-    let data = if fortran && width > 1 && height > 1 {
-        let mut c = vec![0.0; width * height];
-        for y in 0..height {
-            for x in 0..width {
-                c[y * width + x] = values[x * height + y];
-            }
-        }
-        c
-    } else {
-        values
-    };
+    if npy.kind != gb_core::npy::NpyKind::Float {
+        return Err(format!(
+            "expected float32 or float64 values, found dtype {}",
+            npy.dtype
+        ));
+    }
+    let data: Vec<f32> = npy.data.into_iter().map(|v| v as f32).collect();
     Ok(ScalarMap {
         width,
         height,
@@ -251,7 +224,7 @@ mod tests {
         out
     }
 
-    /// Found by `cargo xtask fuzz`: a Fortran-order map with a zero side and a huge other
+    /// Found by `cargo xtask-fuzz`: a Fortran-order map with a zero side and a huge other
     /// side used to loop over the huge side (a hang); it now reads as the empty map it is.
     #[test]
     fn an_empty_fortran_map_with_a_huge_side_reads_at_once() {

@@ -450,112 +450,16 @@ impl PairSource for DiodeDataset {
 }
 
 /// Reads a numeric `.npy` array (float, integer or bool; C or Fortran order) as C-order
-/// `f32`, with its shape. Errors name the file.
+/// `f32`, with its shape, through the workspace's one reader ([`gb_core::npy`]). Errors name
+/// the file.
 pub fn read_npy_f32(path: &Path) -> Result<(Vec<u64>, Vec<f32>), FinetuneError> {
     let bytes = std::fs::read(path).map_err(|e| FinetuneError::io(path, e))?;
-    let bad = |message: String| FinetuneError::Invalid {
+    let array = gb_core::npy::read_npy(&bytes).map_err(|e| FinetuneError::Invalid {
         path: path.to_path_buf(),
-        message,
-    };
-    gb_core::check_npy_header(&bytes).map_err(|e| bad(format!("bad .npy header: {e}")))?;
-    let file = npyz::NpyFile::new(&bytes[..]).map_err(|e| bad(format!("not a .npy file: {e}")))?;
-    let shape = file.shape().to_vec();
-    let order = file.order();
-    let dtype = file.dtype();
-    let (tc, size) = match &dtype {
-        npyz::DType::Plain(ts) => (ts.type_char(), ts.size_field()),
-        other => return Err(bad(format!("unsupported dtype {}", other.descr()))),
-    };
-    let rd = |e: std::io::Error| bad(format!("cannot read data: {e}"));
-    use npyz::TypeChar as T;
-    let data: Vec<f32> = match (tc, size) {
-        (T::Float, 4) => file.into_vec::<f32>().map_err(rd)?,
-        (T::Float, 8) => file
-            .into_vec::<f64>()
-            .map_err(rd)?
-            .into_iter()
-            .map(|v| v as f32)
-            .collect(),
-        (T::Bool, 1) => file
-            .into_vec::<bool>()
-            .map_err(rd)?
-            .into_iter()
-            .map(|v| v as u8 as f32)
-            .collect(),
-        (T::Uint, 1) => file
-            .into_vec::<u8>()
-            .map_err(rd)?
-            .into_iter()
-            .map(f32::from)
-            .collect(),
-        (T::Uint, 2) => file
-            .into_vec::<u16>()
-            .map_err(rd)?
-            .into_iter()
-            .map(f32::from)
-            .collect(),
-        (T::Uint, 4) => file
-            .into_vec::<u32>()
-            .map_err(rd)?
-            .into_iter()
-            .map(|v| v as f32)
-            .collect(),
-        (T::Uint, 8) => file
-            .into_vec::<u64>()
-            .map_err(rd)?
-            .into_iter()
-            .map(|v| v as f32)
-            .collect(),
-        (T::Int, 1) => file
-            .into_vec::<i8>()
-            .map_err(rd)?
-            .into_iter()
-            .map(f32::from)
-            .collect(),
-        (T::Int, 2) => file
-            .into_vec::<i16>()
-            .map_err(rd)?
-            .into_iter()
-            .map(f32::from)
-            .collect(),
-        (T::Int, 4) => file
-            .into_vec::<i32>()
-            .map_err(rd)?
-            .into_iter()
-            .map(|v| v as f32)
-            .collect(),
-        (T::Int, 8) => file
-            .into_vec::<i64>()
-            .map_err(rd)?
-            .into_iter()
-            .map(|v| v as f32)
-            .collect(),
-        _ => return Err(bad(format!("unsupported dtype {}", dtype.descr()))),
-    };
-    let data = match order {
-        npyz::Order::C => data,
-        npyz::Order::Fortran => fortran_to_c(&shape, &data),
-    };
-    Ok((shape, data))
-}
-
-/// Reorders a Fortran-order (first axis fastest) buffer to C order.
-fn fortran_to_c(shape: &[u64], data: &[f32]) -> Vec<f32> {
-    let dims: Vec<usize> = shape.iter().map(|&d| d as usize).collect();
-    let mut out = vec![0.0; data.len()];
-    let mut idx = vec![0usize; dims.len()];
-    for (c_pos, slot) in out.iter_mut().enumerate() {
-        let mut rem = c_pos;
-        for a in (0..dims.len()).rev() {
-            idx[a] = rem % dims[a].max(1);
-            rem /= dims[a].max(1);
-        }
-        let (mut f_pos, mut stride) = (0, 1);
-        for (a, &d) in dims.iter().enumerate() {
-            f_pos += idx[a] * stride;
-            stride *= d;
-        }
-        *slot = data.get(f_pos).copied().unwrap_or(0.0);
-    }
-    out
+        message: e.to_string(),
+    })?;
+    Ok((
+        array.shape,
+        array.data.into_iter().map(|v| v as f32).collect(),
+    ))
 }

@@ -17,7 +17,7 @@
 use serde_json::{json, Value};
 
 use crate::run::RunSummary;
-use crate::svg::{LineChart, Series};
+use gb_report::svg::{LineChart, Series};
 
 /// Baseline comparison: (row label, method).
 pub const BASELINE_ROWS: &[(&str, &str)] = &[

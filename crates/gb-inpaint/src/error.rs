@@ -142,6 +142,14 @@ pub enum InpaintError {
     },
 }
 
+impl From<gb_report::ReportError> for InpaintError {
+    fn from(e: gb_report::ReportError) -> Self {
+        match e {
+            gb_report::ReportError::Io { path, source } => InpaintError::Io { path, source },
+        }
+    }
+}
+
 impl InpaintError {
     /// An [`InpaintError::Io`] for `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {

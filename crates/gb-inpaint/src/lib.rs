@@ -21,8 +21,8 @@
 //! - [`resume`]: what a checkpoint keeps for an exact resume besides the reconstruction
 //!   (run identity, counters, visibility maps);
 //! - [`pre_inpainted`]: the SPIn-NeRF + LaMa baseline's inputs;
-//! - [`report`], [`svg`], [`gif`]: the run's `report.html`, its SVG charts (a small writer of
-//!   our own rather than a plotting crate, see [`svg`]) and the orbit animation;
+//! - [`report`], [`gif`]: the run's `report.html` and its orbit animation, drawn with
+//!   gb-report (the page, the SVG charts, the GIF encoder);
 //! - [`oracle`]: oracle guidance for experiments (the exact score of the object-free image);
 //! - [`visibility`]: visibility-aware guidance (the prior acts only where no training view
 //!   sees the surface);
@@ -55,7 +55,6 @@ pub mod reference;
 pub mod report;
 pub mod resume;
 pub mod run;
-pub mod svg;
 pub mod trainer;
 pub mod visibility;
 
@@ -63,5 +62,5 @@ pub use error::InpaintError;
 pub use guidance::Modality;
 pub use method::{MethodConfig, PromptOverrides, Prompts, SceneCaptions};
 pub use prior::{lora_for, GuidancePrior, PriorInfo};
-pub use run::{RunSpec, RunSummary};
+pub use run::{export_run, run, RunSpec, RunSummary};
 pub use trainer::{FitOptions, FitSummary, GuidedTrainer, StepRecord, TermRecord};

@@ -195,14 +195,25 @@ impl SceneCaptions {
     }
 }
 
-/// Prompts given on the command line; each replaces the resolved template.
+/// Prompts given on the command line; each replaces the resolved template. With the `clap`
+/// feature these are the flags `--prompt`, `--negative-prompt` and `--normal-prompt`.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct PromptOverrides {
-    /// `--prompt`.
+    /// Appearance prompt (RGB guidance).
+    #[cfg_attr(feature = "clap", arg(long = "prompt", value_name = "PROMPT"))]
     pub appearance: Option<String>,
-    /// `--negative-prompt` (RGB guidance).
+    /// Negative prompt of the RGB guidance.
+    #[cfg_attr(
+        feature = "clap",
+        arg(long = "negative-prompt", value_name = "NEGATIVE_PROMPT")
+    )]
     pub negative: Option<String>,
-    /// `--normal-prompt`.
+    /// Geometry prompt (normal-map guidance).
+    #[cfg_attr(
+        feature = "clap",
+        arg(long = "normal-prompt", value_name = "NORMAL_PROMPT")
+    )]
     pub geometry: Option<String>,
 }
 

@@ -5,7 +5,7 @@
 //!
 //! The properties live here once and run in two modes: `tests/tests/fuzz.rs` (in `cargo test`,
 //! [`cases_from_env`] cases per reader, 64 unless `GB_FUZZ_CASES` says otherwise) and
-//! `cargo xtask fuzz` (10 000 cases per reader, with a JSON report).
+//! `cargo xtask-fuzz` (10 000 cases per reader, with a JSON report).
 
 mod brisque;
 mod checkpoint;

@@ -1,13 +1,13 @@
-//! `cargo xtask fuzz`: the reader properties of `gb_tests::fuzz` (the ones `cargo test` runs
-//! with 64 cases) with many cases per reader, recorded in `bench/results/fuzz-<date>.json`.
+//! `cargo xtask-fuzz` (`gb-nerf fuzz` built with the `fuzz` feature): the reader properties of
+//! `gb_tests::fuzz` (the ones `cargo test` runs with 64 cases) with many cases per reader,
+//! recorded in `bench/results/fuzz-<date>.json`. Without the feature the command is one line
+//! saying how to build it, so the installed binary carries no test code.
 
 use std::path::PathBuf;
 
 use anyhow::bail;
 
-use gb_bench::report::{hostname, machine_description, today, write_report};
-
-/// Arguments of `cargo xtask fuzz`.
+/// Arguments of `cargo xtask-fuzz`.
 #[derive(clap::Args)]
 pub struct Args {
     /// Cases per reader.
@@ -24,8 +24,19 @@ pub struct Args {
     pub out: Option<PathBuf>,
 }
 
+/// Without the `fuzz` feature: the one line that says how to get the command.
+#[cfg(not(feature = "fuzz"))]
+pub fn run(_args: Args) -> anyhow::Result<()> {
+    bail!(
+        "fuzz: this gb-nerf was built without the `fuzz` feature (test code); run \
+         `cargo xtask-fuzz` in the repository (or build with `--features fuzz`)"
+    )
+}
+
 /// Runs every reader's properties, writes the report, and fails when any property failed.
+#[cfg(feature = "fuzz")]
 pub fn run(args: Args) -> anyhow::Result<()> {
+    use gb_bench::report::{hostname, machine_description, today, write_report};
     let seed = args.seed.unwrap_or_else(gb_tests::fuzz::seed_from_env);
     let readers: Vec<_> = gb_tests::fuzz::readers()
         .into_iter()

@@ -57,152 +57,35 @@
 //!   (masked training views for a scene without test views), the orbit, the metric table
 //!   and the training curves as SVG (`gb_inpaint::report`).
 
-use std::path::PathBuf;
-
-use gb_core::{BackendKind, Precision};
 use gb_inpaint::run::{run as run_spec, RunSpec, RunSummary};
-use gb_inpaint::PromptOverrides;
-use gb_nerf::train::DepthSupervision;
 
-/// Arguments of `cargo xtask inpaint`.
+/// Arguments of `cargo xtask inpaint`: the library's [`RunSpec`], whose fields are the flags.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Scene folder (LLFF / SPIn-NeRF or Blender layout). Default: generate the procedural
-    /// `stairs` scene into OUT/scene.
-    #[arg(long)]
-    pub scene: Option<PathBuf>,
-    /// Method: gb-nerf-unseen (default, the recommended one), gb-nerf (the paper), bsd,
-    /// mvip-nerf, spin-nerf-sds, csd, none, pre-inpainted, or a .toml file.
-    #[arg(long)]
-    pub method: Option<String>,
-    /// Preset name (fast, balanced, paper) or a path to a TOML config.
-    #[arg(long, default_value = "fast")]
-    pub preset: String,
-    /// The diffusion prior: tiny (default), a diffusers folder, a hub id, or none.
-    #[arg(long)]
-    pub prior: Option<String>,
-    /// A LoRA file (.safetensors) to attach to the prior's U-Net and text encoder.
-    #[arg(long)]
-    pub lora: Option<PathBuf>,
-    /// Appearance prompt (RGB guidance).
-    #[arg(long)]
-    pub prompt: Option<String>,
-    /// Negative prompt of the RGB guidance.
-    #[arg(long)]
-    pub negative_prompt: Option<String>,
-    /// Geometry prompt (normal-map guidance).
-    #[arg(long)]
-    pub normal_prompt: Option<String>,
-    /// Output folder.
-    #[arg(long, default_value = "out/inpaint")]
-    pub out: PathBuf,
-    /// Compute backend: ndarray, flex or wgpu.
-    #[arg(long, value_enum)]
-    pub device: Option<BackendKind>,
-    /// The prior's precision: f16 (half-precision weights and activations; norms, softmax
-    /// and the gradient to the NeRF in f32) or f32. Default: f16 on a GPU card, f32 on the
-    /// CPU backends and on lavapipe. ndarray has f32 only.
-    #[arg(long, value_enum)]
-    pub precision: Option<Precision>,
-    /// Continue from OUT/checkpoint.bin when it exists.
-    #[arg(long)]
-    pub resume: bool,
-    /// Override the preset's number of training steps (at least 1).
-    #[arg(long, value_parser = gb_core::cli::at_least_one)]
-    pub steps: Option<usize>,
-    /// Override the preset's training seed (`[train] seed`: ray batches, the guidance's
-    /// timesteps and noise); `bench quality --seeds` repeats a grid over seeds with it.
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Depth supervision: sparse (COLMAP's points in `sparse/0`, the preset default), dense
-    /// (per-pixel depth maps, an oracle real captures lack) or none.
-    #[arg(long)]
-    pub depth: Option<DepthSupervision>,
-    /// Personalise the prior to the scene first: fine-tune a per-scene LoRA for this many
-    /// steps on the training views' unmasked patches (cached in OUT/personalize/; 0: off;
-    /// default: the method's `[personalize] steps`).
-    #[arg(long, value_name = "STEPS")]
-    pub personalize: Option<usize>,
-    /// A reference view, repeatable: VIEW (a training view's file name) with the object
-    /// removed, as IMAGE (a clean plate or any 2D fill, at the scene's image size). It
-    /// supervises the colour inside VIEW's mask and is carried to the other views through
-    /// the rendered depth; the guidance acts only where no reference reaches. `auto`: the
-    /// middle masked training view filled by `fill --with fsr`, written into OUT.
-    #[arg(long = "reference", value_name = "VIEW=IMAGE|auto")]
-    pub references: Vec<String>,
-    /// The nerfstudio export of the inpainted scene, `OUT/export/`: full (every training view
-    /// rendered, with depth and cameras) or none, the default (on a real capture it takes
-    /// about as long as the training on a CPU; `cargo xtask export --run OUT` writes it later
-    /// from the checkpoint).
-    #[arg(long, default_value = "none", value_name = "full|none")]
-    pub export: gb_inpaint::export::ExportMode,
-    /// Another run's output folder (or its `renders/`): its test-view renders are the
-    /// baseline column of `report.html` (default: the masked input, said so on the page).
-    #[arg(long)]
-    pub baseline: Option<PathBuf>,
-    /// Folder of metric weights (ST-LPIPS, FID, BRISQUE, NIMA; default
-    /// `$GB_TEST_DATA/weights` when it exists). Metrics without weights are reported
-    /// unavailable, with the reason.
-    #[arg(long)]
-    pub weights: Option<PathBuf>,
-    /// Frames of the orbit animation `orbit.gif` (0: none).
-    #[arg(long, default_value_t = 24)]
-    pub orbit_frames: usize,
-    /// Also write `OUT/probe/`: per test view, the hidden region's depth error against the
-    /// truth, its normals and the weights along a few hidden rays (a diagnosis of the
-    /// filled geometry; needs a scene with true depth).
-    #[arg(long)]
-    pub probe: bool,
-}
-
-impl Args {
-    /// The library's run specification of these flags.
-    pub fn spec(&self) -> RunSpec {
-        RunSpec {
-            scene: self.scene.clone(),
-            method: self.method.clone(),
-            preset: self.preset.clone(),
-            prior: self.prior.clone(),
-            lora: self.lora.clone(),
-            prompts: PromptOverrides {
-                appearance: self.prompt.clone(),
-                negative: self.negative_prompt.clone(),
-                geometry: self.normal_prompt.clone(),
-            },
-            device: self.device.unwrap_or_default(),
-            precision: self.precision,
-            seed: self.seed,
-            steps: self.steps,
-            depth: self.depth,
-            personalize: self.personalize,
-            references: self.references.clone(),
-            out: self.out.clone(),
-            resume: self.resume,
-            baseline: self.baseline.clone(),
-            weights: self.weights.clone(),
-            orbit_frames: self.orbit_frames,
-            export: self.export,
-            probe: self.probe,
-            progress: true,
-            program: crate::program_name().into(),
-        }
-    }
+    /// The run.
+    #[command(flatten)]
+    pub spec: RunSpec,
 }
 
 /// Runs the command: one call of [`gb_inpaint::run::run`], then the means on stdout.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let summary: RunSummary = run_spec(&args.spec())?;
+    let spec = RunSpec {
+        progress: true,
+        program: crate::program_name().into(),
+        ..args.spec
+    };
+    let summary: RunSummary = run_spec(&spec)?;
     println!("{}", serde_json::to_string_pretty(&summary.mean)?);
     println!(
         "wrote {} and {}",
-        args.out.join("metrics.json").display(),
-        args.out.join(&summary.report).display()
+        spec.out.join("metrics.json").display(),
+        spec.out.join(&summary.report).display()
     );
     if summary.export.is_none() {
         println!(
             "for nerfstudio: {} export --run {}",
             crate::program_name(),
-            gb_inpaint::run::shell_quote(&args.out.display().to_string())
+            gb_inpaint::run::shell_quote(&spec.out.display().to_string())
         );
     }
     Ok(())

@@ -490,7 +490,7 @@ mod tests {
         assert!(msg.contains("bad.yml") && msg.contains("unclosed"), "{msg}");
     }
 
-    /// Found by `cargo xtask fuzz`: a stray '}' in a flow sequence used to be read as an
+    /// Found by `cargo xtask-fuzz`: a stray '}' in a flow sequence used to be read as an
     /// empty item again and again, without end, until memory ran out.
     #[test]
     fn a_stray_brace_in_a_sequence_is_an_error() {

@@ -40,58 +40,109 @@ use crate::report::RunPage;
 use crate::trainer::{FitOptions, GuidedTrainer};
 
 /// Everything one run needs. Field names follow `cargo xtask inpaint`'s flags, and errors
-/// name a field by its flag.
+/// name a field by its flag. With the `clap` feature it is those flags: the command line
+/// flattens it (`#[command(flatten)]`), so each flag's help is the field's doc below.
 #[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct RunSpec {
-    /// Scene folder (LLFF / SPIn-NeRF or Blender layout); `None`: the procedural `stairs`
-    /// scene, generated into `OUT/scene`.
+    /// Scene folder (LLFF / SPIn-NeRF or Blender layout). Default: generate the procedural
+    /// `stairs` scene into OUT/scene.
+    #[cfg_attr(feature = "clap", arg(long))]
     pub scene: Option<PathBuf>,
-    /// A built-in method name or a `.toml` file (a method, or a run's `config.toml`);
-    /// `None`: [`DEFAULT_METHOD`] (or `none` when `prior` is `none`).
+    /// Method: gb-nerf-unseen (default, the recommended one), gb-nerf (the paper), bsd,
+    /// mvip-nerf, spin-nerf-sds, csd, none, pre-inpainted, or a .toml file (a method, or a
+    /// run's config.toml). Default: none when --prior is none.
+    #[cfg_attr(feature = "clap", arg(long))]
     pub method: Option<String>,
-    /// A preset name (fast, balanced, paper) or a `.toml` file.
+    /// Preset name (fast, balanced, paper) or a path to a TOML config.
+    #[cfg_attr(feature = "clap", arg(long, default_value = "fast"))]
     pub preset: String,
-    /// The prior: `tiny`, a diffusers folder, a hub id, or `none`; `None`: `tiny`.
+    /// The diffusion prior: tiny (default), a diffusers folder, a hub id, or none.
+    #[cfg_attr(feature = "clap", arg(long))]
     pub prior: Option<String>,
-    /// A LoRA file to attach (default: the prior's own for methods with `use_lora`).
+    /// A LoRA file (.safetensors) to attach to the prior's U-Net and text encoder (default:
+    /// the prior's own, for methods with `use_lora`).
+    #[cfg_attr(feature = "clap", arg(long))]
     pub lora: Option<PathBuf>,
     /// Prompts replacing the method's templates.
+    #[cfg_attr(feature = "clap", command(flatten))]
     pub prompts: PromptOverrides,
-    /// The compute backend.
-    pub device: BackendKind,
-    /// The prior's precision (`--precision`); `None`: f16 on a GPU card, f32 elsewhere.
-    pub precision: Option<Precision>,
-    /// Overrides the preset's training seed.
-    pub seed: Option<u64>,
-    /// Overrides the preset's number of steps.
-    pub steps: Option<usize>,
-    /// Overrides the preset's depth supervision (`[train] depth`).
-    pub depth: Option<DepthSupervision>,
-    /// Overrides the method's personalisation steps (`[personalize] steps`; 0: off).
-    pub personalize: Option<usize>,
-    /// Reference views, `VIEW=IMAGE` (`--reference`, repeatable; added to the method's
-    /// `[reference] images`; see [`crate::reference`]), or `auto`: the middle masked training
-    /// view filled by frequency-selective reconstruction ([`crate::fill::auto_reference`]).
-    pub references: Vec<String>,
-    /// The output folder.
+    /// Output folder.
+    #[cfg_attr(feature = "clap", arg(long, default_value = "out/inpaint"))]
     pub out: PathBuf,
-    /// Continue from `OUT/checkpoint.bin` when it exists.
+    /// Compute backend: ndarray, flex or wgpu.
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, value_enum, default_value_t = BackendKind::default())
+    )]
+    pub device: BackendKind,
+    /// The prior's precision: f16 (half-precision weights and activations; norms, softmax
+    /// and the gradient to the NeRF in f32) or f32. Default: f16 on a GPU card, f32 on the
+    /// CPU backends and on lavapipe. ndarray has f32 only.
+    #[cfg_attr(feature = "clap", arg(long, value_enum))]
+    pub precision: Option<Precision>,
+    /// Continue from OUT/checkpoint.bin when it exists.
+    #[cfg_attr(feature = "clap", arg(long))]
     pub resume: bool,
-    /// Another run's folder, whose renders are the report's baseline column.
-    pub baseline: Option<PathBuf>,
-    /// Folder of metric weights (default `$GB_TEST_DATA/weights` when it exists).
-    pub weights: Option<PathBuf>,
-    /// Frames of `orbit.gif` (0: none).
-    pub orbit_frames: usize,
-    /// Whether to write the nerfstudio export (`--export`).
+    /// Override the preset's number of training steps (at least 1).
+    #[cfg_attr(feature = "clap", arg(long, value_parser = gb_core::cli::at_least_one))]
+    pub steps: Option<usize>,
+    /// Override the preset's training seed (`[train] seed`: ray batches, the guidance's
+    /// timesteps and noise); `bench quality --seeds` repeats a grid over seeds with it.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub seed: Option<u64>,
+    /// Depth supervision: sparse (COLMAP's points in `sparse/0`, the preset default), dense
+    /// (per-pixel depth maps, an oracle real captures lack) or none.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub depth: Option<DepthSupervision>,
+    /// Personalise the prior to the scene first: fine-tune a per-scene LoRA for this many
+    /// steps on the training views' unmasked patches (cached in OUT/personalize/; 0: off;
+    /// default: the method's `[personalize] steps`).
+    #[cfg_attr(feature = "clap", arg(long, value_name = "STEPS"))]
+    pub personalize: Option<usize>,
+    /// A reference view, repeatable: VIEW (a training view's file name) with the object
+    /// removed, as IMAGE (a clean plate or any 2D fill, at the scene's image size). It
+    /// supervises the colour inside VIEW's mask and is carried to the other views through
+    /// the rendered depth; the guidance acts only where no reference reaches. `auto`: the
+    /// middle masked training view filled by `fill --with fsr`, written into OUT.
+    #[cfg_attr(
+        feature = "clap",
+        arg(long = "reference", value_name = "VIEW=IMAGE|auto")
+    )]
+    pub references: Vec<String>,
+    /// The nerfstudio export of the inpainted scene, `OUT/export/`: full (every training view
+    /// rendered, with depth and cameras) or none, the default (on a real capture it takes
+    /// about as long as the training on a CPU; `cargo xtask export --run OUT` writes it later
+    /// from the checkpoint).
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, default_value = "none", value_name = "full|none")
+    )]
     pub export: crate::export::ExportMode,
-    /// Write `OUT/probe/`: the hidden region's depth error, normals and ray weights per
-    /// test view (`--probe`; [`probe`]).
+    /// Another run's output folder (or its `renders/`): its test-view renders are the
+    /// baseline column of `report.html` (default: the masked input, said so on the page).
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub baseline: Option<PathBuf>,
+    /// Folder of metric weights (ST-LPIPS, FID, BRISQUE, NIMA; default
+    /// `$GB_TEST_DATA/weights` when it exists). Metrics without weights are reported
+    /// unavailable, with the reason.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub weights: Option<PathBuf>,
+    /// Frames of the orbit animation `orbit.gif` (0: none).
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 24))]
+    pub orbit_frames: usize,
+    /// Also write `OUT/probe/`: per test view, the hidden region's depth error against the
+    /// truth, its normals and the weights along a few hidden rays (a diagnosis of the
+    /// filled geometry; needs a scene with true depth).
+    #[cfg_attr(feature = "clap", arg(long))]
     pub probe: bool,
-    /// Show progress bars.
+    /// Show progress bars (on from the command line).
+    #[cfg_attr(feature = "clap", arg(skip = true))]
     pub progress: bool,
     /// The command that runs `inpaint`, for `config.toml`'s reproducing line: `cargo xtask`
-    /// in a clone, `gb-nerf` (the default) for the installed command.
+    /// in a clone, `gb-nerf` (the default) for the installed command. The command line sets
+    /// it after parsing.
+    #[cfg_attr(feature = "clap", arg(skip = String::from("gb-nerf")))]
     pub program: String,
 }
 

@@ -26,8 +26,8 @@ use gb_nerf::train::output::turbo;
 use serde::Serialize;
 
 use crate::error::InpaintError;
-use crate::svg::{tile, LineChart, Series};
 use crate::trainer::GuidedTrainer;
+use gb_report::svg::{tile, LineChart, Series};
 
 /// Relative depth tolerance of "at the true surface" (3DGIC's depth test uses the same 5%).
 pub const TOLERANCE: f32 = 0.05;
