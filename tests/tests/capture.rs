@@ -182,3 +182,78 @@ fn capture_registers_every_view_with_the_generator_s_cameras() {
         "{err}"
     );
 }
+
+/// `--camera radial`: COLMAP fits two radial terms (near 0 on these pinhole renders), then
+/// `image_undistorter` writes a pinhole camera and the masks follow the same mapping: every
+/// view registers, the images keep their size within 2 pixels, the masks their pixels, and
+/// the cameras the generator's within the pinhole test's bounds.
+#[test]
+#[cfg_attr(
+    gb_no_colmap,
+    ignore = "needs COLMAP on PATH (apt-get install colmap), as .ci/run installs it"
+)]
+fn a_radial_lens_is_undistorted_with_its_masks() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().join("scene");
+    assert_success(
+        &xtask(&["scene", "--name", "stairs", "--seed", "5", "--out", s(&d)]),
+        "scene",
+    );
+    let images = d.join("images_1");
+    let out = dir.path().join("capture");
+    let (_, truth) = load(&d, &LoadOptions::default()).unwrap();
+    let focal = truth.views[0].camera.fx.to_string();
+    let run = xtask(&[
+        "capture",
+        "--images",
+        s(&images),
+        "--masks",
+        s(&images.join("label")),
+        "--out",
+        s(&out),
+        "--focal",
+        &focal,
+        "--camera",
+        "radial",
+    ]);
+    assert_success(&run, "capture");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(stdout.contains("radial distortion k1"), "{stdout}");
+    let (_, got) = load(&out, &LoadOptions::default()).unwrap();
+    assert_eq!(got.views.len(), truth.views.len(), "every view registered");
+    for (a, b) in truth.views.iter().zip(&got.views) {
+        let (ta, tb) = (&a.camera, &b.camera);
+        assert!(
+            ta.width.abs_diff(tb.width) <= 2 && ta.height.abs_diff(tb.height) <= 2,
+            "{}: {}x{} undistorted to {}x{}",
+            a.name,
+            ta.width,
+            ta.height,
+            tb.width,
+            tb.height
+        );
+        if let (Some(m), Some(n)) = (&a.mask, &b.mask) {
+            let area = |d: &[bool]| d.iter().filter(|x| **x).count() as f64;
+            let (x, y) = (area(&m.data), area(&n.data));
+            assert!(
+                (x - y).abs() <= 0.05 * x,
+                "{}: mask of {x} pixels, {y} undistorted",
+                a.name
+            );
+        }
+    }
+    let (rot, centre) = camera_errors(&truth, &got);
+    eprintln!(
+        "capture --camera radial: relative rotation error {rot:.3} deg, centre error {:.3}%",
+        100.0 * centre
+    );
+    assert!(
+        rot < 1.5,
+        "relative rotations off by up to {rot:.3} degrees"
+    );
+    assert!(
+        centre < 0.05,
+        "centre distances off by up to {:.2}%",
+        100.0 * centre
+    );
+}

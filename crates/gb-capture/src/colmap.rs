@@ -62,7 +62,7 @@ pub(crate) fn image_size(path: &Path) -> Result<(usize, usize), CaptureError> {
 }
 
 /// Runs `colmap STAGE ARGS`, its output to `work/STAGE.log`.
-fn run(
+pub(crate) fn run(
     program: &Path,
     stage: &'static str,
     args: &[&str],
@@ -93,14 +93,14 @@ fn run(
 }
 
 /// Feature extraction (the object masked out), matching and mapping in `work`; returns the
-/// largest model the mapper made.
+/// largest model the mapper made, with its folder.
 pub fn reconstruct(
     opts: &CaptureOptions,
     images: &[PathBuf],
     masks: &[Option<PathBuf>],
     work: &Path,
     progress: &mut impl FnMut(&str),
-) -> Result<Model, CaptureError> {
+) -> Result<(Model, PathBuf), CaptureError> {
     let db = work.join("database.db");
     // a fresh database: COLMAP adds to an existing one
     if db.exists() {
@@ -120,18 +120,23 @@ pub fn reconstruct(
         "--ImageReader.single_camera",
         "1",
         "--ImageReader.camera_model",
-        "SIMPLE_PINHOLE",
+        opts.lens.colmap_model(),
         "--SiftExtraction.use_gpu",
         "0",
     ];
     if masked > 0 {
         args.extend(["--ImageReader.mask_path", &fm]);
     }
-    // a known focal length: SIMPLE_PINHOLE's f, cx, cy with the centre of the first image
+    // a known focal length: f, cx, cy with the centre of the first image (and no distortion
+    // to start from, for a radial lens)
     let params = match opts.focal {
         Some(f) => {
             let (w, h) = image_size(&images[0])?;
-            Some(format!("{f},{},{}", w as f64 / 2.0, h as f64 / 2.0))
+            let radial = match opts.lens {
+                crate::Lens::Pinhole => "",
+                crate::Lens::Radial => ",0,0",
+            };
+            Some(format!("{f},{},{}{radial}", w as f64 / 2.0, h as f64 / 2.0))
         }
         None => None,
     };
@@ -173,7 +178,7 @@ pub fn reconstruct(
         work,
     )?;
     // the mapper writes one model per connected component: 0, 1, ...
-    let mut best: Option<Model> = None;
+    let mut best: Option<(Model, PathBuf)> = None;
     let entries = std::fs::read_dir(&sparse).map_err(|e| CaptureError::io(&sparse, e))?;
     for entry in entries {
         let path = entry.map_err(|e| CaptureError::io(&sparse, e))?.path();
@@ -181,14 +186,14 @@ pub fn reconstruct(
             let model = Model::read(&path)?;
             if best
                 .as_ref()
-                .is_none_or(|b| model.images.len() > b.images.len())
+                .is_none_or(|b| model.images.len() > b.0.images.len())
             {
-                best = Some(model);
+                best = Some((model, path));
             }
         }
     }
     // no model at all: nothing registered, which the check below reports
-    let model = best.unwrap_or_default();
+    let (model, model_dir) = best.unwrap_or_else(|| (Model::default(), sparse.join("0")));
     let names: Vec<String> = model.images.values().map(|i| i.name.clone()).collect();
     let total = images.len();
     let unregistered: Vec<String> = images
@@ -212,5 +217,5 @@ pub fn reconstruct(
             "COLMAP did not register every image: those are left out of the scene"
         );
     }
-    Ok(model)
+    Ok((model, model_dir))
 }

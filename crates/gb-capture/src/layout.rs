@@ -39,14 +39,37 @@ fn bounds(model: &Model, image: &Image) -> Option<(f64, f64)> {
     Some((quantile(&z, 0.001), quantile(&z, 0.999)))
 }
 
+/// A radial capture's undistortion, for [`write_scene`]: the photos' (distorted) model, and
+/// the folder of the undistorted images that `model` describes.
+pub struct Undistortion<'a> {
+    /// The mapper's model of the photos.
+    pub photos: &'a Model,
+    /// `image_undistorter`'s images.
+    pub images: &'a Path,
+}
+
+/// A mask file as bits (1 on the object).
+fn mask_bits(path: &Path) -> Result<(usize, usize, Vec<f32>), CaptureError> {
+    let (w, h, values) = gb_core::read_gray(path)?;
+    let bits = values
+        .iter()
+        .map(|&v| if v > 0.0 { 1.0 } else { 0.0 })
+        .collect();
+    Ok((w, h, bits))
+}
+
 /// Writes the scene: `images/`, `images/label/`, `sparse/0/` and `poses_bounds.npy` for the
-/// images that `model` registered (module docs of the crate). `out/images` and
-/// `out/sparse` are replaced.
+/// images that `model` (read from `model_dir`) registered (module docs of the crate). With an
+/// [`Undistortion`], `model` is the undistorted one: each image comes from the undistorted
+/// folder and its mask is mapped from the photo's camera to it
+/// ([`crate::undistort::undistort_mask`]). `out/images` and `out/sparse` are replaced.
 pub fn write_scene(
     out: &Path,
     images: &[PathBuf],
     masks: &[Option<PathBuf>],
     model: &Model,
+    model_dir: &Path,
+    undistortion: Option<&Undistortion>,
 ) -> Result<CaptureReport, CaptureError> {
     let image_dir = out.join("images");
     let label_dir = image_dir.join("label");
@@ -73,6 +96,7 @@ pub fn write_scene(
         masked: 0,
         points: model.points.len(),
         left_out: Vec::new(),
+        distortion: None,
     };
     for (path, mask) in images.iter().zip(masks) {
         let name = crate::file_name(path);
@@ -81,7 +105,7 @@ pub fn write_scene(
             continue;
         };
         let bad_model = |reason: String| gb_nerf::scene::SceneError::Colmap {
-            path: out.join("colmap/sparse"),
+            path: model_dir.to_path_buf(),
             reason,
         };
         let camera = model.cameras.get(&image.camera_id).ok_or_else(|| {
@@ -90,21 +114,69 @@ pub fn write_scene(
                 image.camera_id
             ))
         })?;
-        // SIMPLE_PINHOLE's first parameter is its focal length
+        // SIMPLE_PINHOLE's first parameter is its focal length; an undistorted PINHOLE
+        // camera must have one, and its principal point at the centre
         let focal =
-            camera.params.first().copied().ok_or_else(|| {
-                bad_model(format!("camera {} has no parameters", image.camera_id))
-            })?;
+            if camera.model == "PINHOLE" {
+                crate::undistort::check_centred(camera, image.camera_id).map_err(bad_model)?
+            } else {
+                camera.params.first().copied().ok_or_else(|| {
+                    bad_model(format!("camera {} has no parameters", image.camera_id))
+                })?
+            };
+        let (src, mask) = match undistortion {
+            None => (path.clone(), mask.as_deref().map(mask_bits).transpose()?),
+            Some(u) => {
+                let src = u.images.join(&name);
+                if !src.is_file() {
+                    return Err(bad_model(format!(
+                        "image_undistorter wrote no {} (see colmap/image_undistorter.log)",
+                        src.display()
+                    ))
+                    .into());
+                }
+                let photo_camera = u
+                    .photos
+                    .images
+                    .values()
+                    .find(|i| i.name == name)
+                    .and_then(|i| u.photos.cameras.get(&i.camera_id))
+                    .ok_or_else(|| {
+                        bad_model(format!(
+                            "{name} is undistorted but not in the photos' model"
+                        ))
+                    })?;
+                let mask = match mask {
+                    Some(m) => {
+                        let (w, h, bits) = mask_bits(m)?;
+                        if (w as u64, h as u64) != (photo_camera.width, photo_camera.height) {
+                            return Err(CaptureError::MaskSize {
+                                path: m.clone(),
+                                mask_w: w,
+                                mask_h: h,
+                                image_w: photo_camera.width as usize,
+                                image_h: photo_camera.height as usize,
+                            });
+                        }
+                        let mapped = crate::undistort::undistort_mask(photo_camera, camera, &bits)
+                            .ok_or_else(|| {
+                                bad_model(format!(
+                                    "cannot map a mask from a {} camera to a {} one",
+                                    photo_camera.model, camera.model
+                                ))
+                            })?;
+                        Some((camera.width as usize, camera.height as usize, mapped))
+                    }
+                    None => None,
+                };
+                (src, mask)
+            }
+        };
         let dst = image_dir.join(&name);
-        std::fs::copy(path, &dst).map_err(|e| CaptureError::io(&dst, e))?;
-        if let Some(mask) = mask {
-            let (w, h, values) = gb_core::read_gray(mask)?;
-            let bits: Vec<f32> = values
-                .iter()
-                .map(|&v| if v > 0.0 { 1.0 } else { 0.0 })
-                .collect();
+        std::fs::copy(&src, &dst).map_err(|e| CaptureError::io(&dst, e))?;
+        if let Some((w, h, bits)) = &mask {
             let dst = label_dir.join(format!("{}.png", gb_nerf::scene::files::stem(path)));
-            gb_core::write_gray_png(&dst, w, h, &bits)?;
+            gb_core::write_gray_png(&dst, *w, *h, bits)?;
             report.masked += 1;
         }
         let (near, far) = bounds(model, image).unwrap_or(fallback);

@@ -5,11 +5,14 @@
 //!    white (non-zero) on the object. A mask that names no image is an error; an image
 //!    without a mask is a view without the object's mask.
 //! 2. **COLMAP** ([`colmap`]), on the CPU, each stage logged to `OUT/colmap/STAGE.log`:
-//!    feature extraction with one shared `SIMPLE_PINHOLE` camera (one focal length, the
-//!    principal point at the image centre: the intrinsics of the LLFF layout, so no
-//!    undistortion step is needed) and the object masked out (COLMAP's `mask_path`, black
-//!    where the object is), so the object's features do not drive the poses; exhaustive or
-//!    sequential matching; the mapper.
+//!    feature extraction with one shared camera and the object masked out (COLMAP's
+//!    `mask_path`, black where the object is), so the object's features do not drive the
+//!    poses; exhaustive or sequential matching; the mapper. The camera ([`Lens`]) is
+//!    `SIMPLE_PINHOLE` by default (one focal length, the principal point at the image centre:
+//!    the intrinsics of the LLFF layout, for photos without visible distortion, as phones'
+//!    processed JPEGs are), or `RADIAL` (two radial distortion terms, for wide or uncorrected
+//!    lenses), whose images, model and masks are then undistorted to an ideal `PINHOLE`
+//!    camera ([`undistort`]: COLMAP's `image_undistorter`, the masks by the same mapping).
 //! 3. **The scene** ([`layout`]), the LLFF layout of `gb_nerf::scene::llff`: `images/` (the
 //!    registered images), `images/label/` (their masks, 0/255), `sparse/0/` (the model, whose
 //!    points become sparse depth) and `poses_bounds.npy` (camera-to-world poses in LLFF's
@@ -22,6 +25,7 @@
 pub mod colmap;
 pub mod error;
 pub mod layout;
+pub mod undistort;
 
 use std::path::{Path, PathBuf};
 
@@ -36,6 +40,26 @@ pub enum Matcher {
     Exhaustive,
     /// Neighbours in name order (a video's frames).
     Sequential,
+}
+
+/// The lens model COLMAP fits (`--camera`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Lens {
+    /// `SIMPLE_PINHOLE`: no distortion (the default).
+    #[default]
+    Pinhole,
+    /// `RADIAL` (k1, k2), then undistortion to `PINHOLE`.
+    Radial,
+}
+
+impl Lens {
+    /// COLMAP's name of the camera model.
+    pub fn colmap_model(self) -> &'static str {
+        match self {
+            Lens::Pinhole => "SIMPLE_PINHOLE",
+            Lens::Radial => "RADIAL",
+        }
+    }
 }
 
 /// What [`capture`] needs.
@@ -54,6 +78,8 @@ pub struct CaptureOptions {
     /// The focal length in pixels when it is known (a calibrated camera): COLMAP then keeps it
     /// fixed instead of estimating it, which also steadies the poses of small captures.
     pub focal: Option<f64>,
+    /// The lens model.
+    pub lens: Lens,
 }
 
 /// What [`capture`] made.
@@ -69,6 +95,8 @@ pub struct CaptureReport {
     pub points: usize,
     /// Images left out (not registered).
     pub left_out: Vec<String>,
+    /// The fitted distortion `(k1, k2)` of a radial lens, undistorted away.
+    pub distortion: Option<(f64, f64)>,
 }
 
 /// The file name of `path` (lossy), for messages and COLMAP's image names. Every path here
@@ -121,7 +149,38 @@ pub fn capture(
     colmap::check_program(&opts.colmap)?;
     let work = opts.out.join("colmap");
     std::fs::create_dir_all(&work).map_err(|e| CaptureError::io(&work, e))?;
-    let model = colmap::reconstruct(opts, &images, &masks, &work, &mut progress)?;
-    progress("writing the scene");
-    layout::write_scene(&opts.out, &images, &masks, &model)
+    let (model, model_dir) = colmap::reconstruct(opts, &images, &masks, &work, &mut progress)?;
+    match opts.lens {
+        Lens::Pinhole => {
+            progress("writing the scene");
+            layout::write_scene(&opts.out, &images, &masks, &model, &model_dir, None)
+        }
+        Lens::Radial => {
+            progress("COLMAP undistortion");
+            let und = undistort::undistort(&opts.colmap, &opts.images, &model_dir, &work)?;
+            progress("writing the scene");
+            let mut report = layout::write_scene(
+                &opts.out,
+                &images,
+                &masks,
+                &und.model,
+                &und.sparse,
+                Some(&layout::Undistortion {
+                    photos: &model,
+                    images: &und.images,
+                }),
+            )?;
+            // one shared camera (single_camera): its k1, k2
+            report.distortion =
+                model
+                    .cameras
+                    .values()
+                    .next()
+                    .and_then(|c| match c.params.as_slice() {
+                        [_, _, _, k1, k2] => Some((*k1, *k2)),
+                        _ => None,
+                    });
+            Ok(report)
+        }
+    }
 }

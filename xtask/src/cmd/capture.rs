@@ -3,12 +3,12 @@
 //!
 //! ```text
 //! cargo xtask capture --images DIR [--masks DIR] --out SCENE [--matcher exhaustive|sequential]
-//!     [--colmap PATH] [--focal PX]
+//!     [--colmap PATH] [--focal PX] [--camera pinhole|radial]
 //! ```
 
 use std::path::PathBuf;
 
-use gb_capture::{capture, CaptureOptions, Matcher};
+use gb_capture::{capture, CaptureOptions, Lens, Matcher};
 
 /// Arguments of `cargo xtask capture`.
 #[derive(clap::Args)]
@@ -33,6 +33,18 @@ pub struct Args {
     /// estimated.
     #[arg(long)]
     focal: Option<f64>,
+    /// The lens: `pinhole` (no distortion, the default: phones' processed photos) or `radial`
+    /// (two radial terms fitted, then the images, poses and masks undistorted to a pinhole
+    /// camera: wide or uncorrected lenses).
+    #[arg(long, value_enum, default_value_t = CameraArg::Pinhole)]
+    camera: CameraArg,
+}
+
+/// `--camera`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum CameraArg {
+    Pinhole,
+    Radial,
 }
 
 /// `--matcher`.
@@ -54,8 +66,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         colmap: args.colmap,
         focal: args.focal,
+        lens: match args.camera {
+            CameraArg::Pinhole => Lens::Pinhole,
+            CameraArg::Radial => Lens::Radial,
+        },
     };
     let report = capture(&opts, |stage| tracing::info!("capture: {stage}"))?;
+    if let Some((k1, k2)) = report.distortion {
+        println!("radial distortion k1 {k1:.5}, k2 {k2:.5}: undistorted to a pinhole camera");
+    }
     println!(
         "wrote {}: {} of {} images registered ({} with a mask), {} points{}; next: cargo xtask inpaint --scene {}",
         args.out.display(),

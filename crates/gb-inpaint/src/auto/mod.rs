@@ -439,8 +439,9 @@ pub fn choose_weights(
     if !left_out.is_empty() {
         tracing::warn!(
             ?left_out,
-            "auto weights: ranked without these metrics (their weights are missing: pass \
-             --weights DIR or set GB_TEST_DATA to the folder holding weights/)"
+            "auto weights: ranked without these metrics (unavailable on the pseudo-holes' \
+             boxes: their weights are missing, pass --weights DIR or set GB_TEST_DATA to the \
+             folder holding weights/, or see the warnings above)"
         );
     }
     let best = best_trial(&trials);
@@ -617,6 +618,32 @@ struct ScoreTarget {
     disparity: Option<gb_eval::disparity::ScalarMap>,
 }
 
+/// The smallest box side a trial scores, in pixels: ST-LPIPS needs 21, and a pseudo-hole seen
+/// edge-on in one view can be narrower; a box that small grows about its centre, inside the
+/// image (its mask is still the withheld pixels).
+pub const MIN_SCORE_SIDE: usize = 32;
+
+/// `(x0, y0, x1, y1)` grown to at least `min` pixels a side (or the whole image's side),
+/// about its centre, inside a `width` x `height` image.
+fn grow_box(
+    (x0, y0, x1, y1): (usize, usize, usize, usize),
+    min: usize,
+    width: usize,
+    height: usize,
+) -> (usize, usize, usize, usize) {
+    let grow = |a: usize, b: usize, n: usize| {
+        let side = min.min(n);
+        if b - a >= side {
+            return (a, b);
+        }
+        let lo = ((a + b) / 2).saturating_sub(side / 2).min(n - side);
+        (lo, lo + side)
+    };
+    let (x0, x1) = grow(x0, x1, width);
+    let (y0, y1) = grow(y0, y1, height);
+    (x0, y0, x1, y1)
+}
+
 /// The [`ScoreTarget`]s of the training views that `holes` (per training view, full
 /// resolution) shows in, at downscale `f`.
 fn score_targets(scene: &Scene, holes: &[Option<Mask>], f: usize) -> Vec<ScoreTarget> {
@@ -626,6 +653,7 @@ fn score_targets(scene: &Scene, holes: &[Option<Mask>], f: usize) -> Vec<ScoreTa
         let mask = downscale_mask(hole, f);
         let Some(bbox) = mask.bbox() else { continue };
         let v = prepare_view(view, f);
+        let bbox = grow_box(bbox, MIN_SCORE_SIDE, v.image.width, v.image.height);
         let (x0, y0, x1, y1) = bbox;
         let (w, h) = (x1 - x0, y1 - y0);
         let pixels: Vec<usize> = (y0..y1)
@@ -764,6 +792,19 @@ fn best_trial(trials: &[Trial]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Found on `stairs` seed 100: a pseudo-hole 20 pixels wide in one view left ST-LPIPS
+    /// out of every trial's ranking.
+    #[test]
+    fn small_score_boxes_grow_to_the_metrics_minimum_inside_the_image() {
+        assert_eq!(grow_box((10, 5, 30, 48), 32, 100, 75), (4, 5, 36, 48));
+        // at an edge the box shifts inside
+        assert_eq!(grow_box((0, 70, 5, 75), 32, 100, 75), (0, 43, 32, 75));
+        // an image smaller than the minimum: its whole side
+        assert_eq!(grow_box((3, 3, 5, 5), 32, 20, 10), (0, 0, 20, 10));
+        // a large box is kept
+        assert_eq!(grow_box((1, 2, 60, 50), 32, 100, 75), (1, 2, 60, 50));
+    }
 
     fn trial(r: f64, n: f64, s: [Option<f64>; 3]) -> Trial {
         Trial {
