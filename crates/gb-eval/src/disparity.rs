@@ -115,6 +115,25 @@ fn read_npy(bytes: &[u8]) -> Result<ScalarMap, String> {
     })
 }
 
+/// Disparity (`1 / depth`, 0 where the depth is not a positive number) as a map.
+pub fn disparity_map(depth: &[f32], width: usize, height: usize) -> ScalarMap {
+    let data = depth
+        .iter()
+        .map(|d| {
+            if d.is_finite() && *d > 0.0 {
+                1.0 / d
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    ScalarMap {
+        width,
+        height,
+        data,
+    }
+}
+
 /// The reference's 8-bit, 3-channel rendering of a disparity map (see the module docs).
 pub fn disparity_to_rgb8(disp: &ScalarMap) -> Result<RgbImage, MetricError> {
     let expected = disp.width * disp.height;

@@ -23,34 +23,9 @@ use gb_nerf::train::data::prepare_view;
 
 use crate::crop::CropGeometry;
 use crate::error::InpaintError;
+pub use crate::method::{AutoReference, FillWith};
 use crate::method::{PromptOverrides, SceneCaptions};
 use crate::prior::LORA_FILE_NAME;
-
-/// Which 2D fill [`fill_view`] runs (module docs).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum FillWith {
-    /// Frequency-selective reconstruction ([`gb_fill::fsr`]), the default: it beats the
-    /// tiny prior's fill by 5-9 dB of masked PSNR on every procedural scene
-    /// (`bench/results/fill-2026-12-05.json`) and needs no weights.
-    #[default]
-    Fsr,
-    /// The membrane fill ([`gb_fill::smooth`]).
-    Smooth,
-    /// The diffusion prior (DDIM sampling).
-    Prior,
-}
-
-impl FillWith {
-    /// The name `--with` takes.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Fsr => "fsr",
-            Self::Smooth => "smooth",
-            Self::Prior => "prior",
-        }
-    }
-}
 
 /// What `fill` needs besides the scene and the view.
 #[derive(Debug, Clone)]
@@ -202,7 +177,7 @@ pub fn fill_view(
         .map(|m| f32::from(u8::from(*m)))
         .collect();
     let captions = SceneCaptions::read(scene_dir);
-    let method = crate::MethodConfig::load(crate::run::DEFAULT_METHOD)?;
+    let method = crate::MethodConfig::load(crate::method::DEFAULT_METHOD)?;
     let prompts = method.resolve_prompts(&captions, &opts.prompts);
     let req = InpaintRequest {
         width: r,
@@ -296,18 +271,6 @@ pub fn fill(scene_dir: &Path, view: &str, opts: &FillOptions) -> Result<Fill, In
             source: Box::new(source),
         })?;
     fill_view(&scene, scene_dir, view, opts)
-}
-
-/// The record of `--reference auto` in the run's method (`[reference.auto]`).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct AutoReference {
-    /// The filled training view.
-    pub view: String,
-    /// The fill.
-    pub with: FillWith,
-    /// Its settings.
-    pub fsr: gb_fill::FsrSettings,
 }
 
 /// `--reference auto` (issue 46): the middle masked training view of `scene` (the view that

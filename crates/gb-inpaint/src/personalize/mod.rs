@@ -32,10 +32,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use gb_core::{BackendKind, RgbImage};
-use gb_finetune::captions::CaptionMode;
 use gb_finetune::train::batch::make_batch;
 use gb_finetune::train::loss::inpainting_loss;
-use gb_finetune::train::{FinetuneConfig, FinetuneTrainer, PriorModels, TrainTarget};
+use gb_finetune::train::{FinetuneTrainer, PriorModels};
 use gb_finetune::FinetuneError;
 use gb_nerf::scene::{Scene, Split};
 use gb_nerf::train::data::TrainData;
@@ -43,6 +42,7 @@ use gb_nerf::train::DepthSupervision;
 use serde::{Deserialize, Serialize};
 
 use crate::error::InpaintError;
+pub use crate::method::PersonalizeSettings;
 pub use patches::ScenePatches;
 
 /// Fresh-mask batches the loss is reported on.
@@ -56,79 +56,6 @@ pub const MIN_PATCHES: usize = 32;
 pub const MIN_PATCH_SIDE: usize = 16;
 /// The cache's folder in the run folder.
 pub const FOLDER: &str = "personalize";
-
-/// The personalisation of a method (`[personalize]` in its config).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct PersonalizeSettings {
-    /// AdamW steps (0: off, the default).
-    pub steps: usize,
-    /// Learning rate (the tiny prior's geometric LoRA recipe: 1e-3).
-    pub lr: f64,
-    /// LoRA rank.
-    pub rank: usize,
-    /// LoRA alpha (scale `alpha / rank`).
-    pub alpha: f64,
-    /// Patches per step.
-    pub batch: usize,
-    /// Whether the text encoder gets adapters too.
-    pub train_text_encoder: bool,
-    /// Seed of the adapters, patches, holes, noise and timesteps.
-    pub seed: u64,
-    /// A folder of object-free images of the training views (`NAME.png`, the view's size):
-    /// their masked squares are trained on too (module docs). Views without one are
-    /// patched as usual.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub object_free: Option<PathBuf>,
-}
-
-impl Default for PersonalizeSettings {
-    fn default() -> Self {
-        Self {
-            steps: 0,
-            lr: 1e-3,
-            rank: 8,
-            alpha: 8.0,
-            batch: 4,
-            train_text_encoder: false,
-            seed: 0,
-            object_free: None,
-        }
-    }
-}
-
-impl PersonalizeSettings {
-    /// Whether personalisation runs.
-    pub fn enabled(&self) -> bool {
-        self.steps > 0
-    }
-
-    /// Whether these are the default settings (off).
-    pub fn is_default(&self) -> bool {
-        *self == Self::default()
-    }
-
-    /// The fine-tuning recipe at the prior's `resolution`.
-    fn recipe(&self, resolution: usize) -> FinetuneConfig {
-        FinetuneConfig {
-            target: TrainTarget::Lora,
-            steps: self.steps,
-            batch: self.batch,
-            grad_accum: 1,
-            lr: self.lr,
-            rank: self.rank,
-            alpha: self.alpha,
-            train_text_encoder: self.train_text_encoder,
-            resolution,
-            mode: CaptionMode::Captions,
-            rgb_only: true,
-            seed: self.seed,
-            checkpoint_every: 0,
-            validate_every: 0,
-            ..FinetuneConfig::default()
-        }
-    }
-}
 
 /// What personalisation did (`metrics.json`'s `personalize`, and the cache file).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -26,9 +26,10 @@ use gb_core::{BackendKind, Precision};
 use gb_eval::suite::{evaluate, PairSet, SuiteOptions};
 use gb_nerf::train::DepthSupervision;
 
+pub use crate::method::DEFAULT_METHOD;
 pub use config_file::shell_quote;
 pub use export_run::export_run;
-pub use setup::{load_method, load_preset, method_and_prior, DEFAULT_METHOD};
+pub use setup::{load_method, load_preset, method_and_prior};
 pub use summary::{GuidanceSummary, MeanMetrics, OrbitSummary, RunSummary, ViewMetrics, NOTES};
 pub use test_views::{disparity_map, render_test_views, TestViews};
 

@@ -11,12 +11,7 @@ use gb_nerf::train::NerfConfig;
 use super::RunSpec;
 use crate::error::InpaintError;
 use crate::method::MethodConfig;
-
-/// The method a run uses when none is given: the one the README recommends,
-/// `gb-nerf-unseen` (the paper's guidance, confined to the pixels no other training view
-/// sees), which beats the paper's `gb-nerf` on every mask-box metric measured with the
-/// built-in prior (README, "Which method").
-pub const DEFAULT_METHOD: &str = "gb-nerf-unseen";
+use crate::method::DEFAULT_METHOD;
 
 /// The method name and prior spec of a run: by default [`DEFAULT_METHOD`] with the built-in
 /// tiny prior; `prior = "none"` implies the method `none` unless one is given.

@@ -4,7 +4,6 @@
 
 use std::path::Path;
 
-use gb_eval::disparity::ScalarMap;
 use gb_eval::report::EvalReport;
 use gb_eval::suite::EvalPair;
 use gb_nerf::scene::{Scene, Split};
@@ -15,24 +14,7 @@ use super::summary::ViewMetrics;
 use crate::error::InpaintError;
 use crate::trainer::GuidedTrainer;
 
-/// Disparity (`1 / depth`, 0 where the depth is not a positive number) as a map.
-pub fn disparity_map(depth: &[f32], width: usize, height: usize) -> ScalarMap {
-    let data = depth
-        .iter()
-        .map(|d| {
-            if d.is_finite() && *d > 0.0 {
-                1.0 / d
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    ScalarMap {
-        width,
-        height,
-        data,
-    }
-}
+pub use gb_eval::disparity::disparity_map;
 
 /// The rendered test views: each view's render / ground-truth pair and its mean field
 /// evaluations per ray.
