@@ -28,7 +28,6 @@ use gb_core::RgbImage;
 
 use crate::error::MetricError;
 use crate::image_metrics::{check_bbox, check_pair};
-use crate::stlpips::crop;
 
 /// The LPIPS input scaling constants (`ScalingLayer` of both packages).
 const SHIFT: [f32; 3] = [-0.030, -0.088, -0.188];
@@ -345,4 +344,16 @@ pub(crate) fn box_distance(
     check_pair(pred, gt)?;
     check_bbox(x0, y0, x1, y1, pred.width, pred.height)?;
     distance(&crop(pred, x0, y0, x1, y1), &crop(gt, x0, y0, x1, y1))
+}
+/// The crop `x0..x1`, `y0..y1` of an image (bounds already checked).
+fn crop(img: &RgbImage, x0: usize, y0: usize, x1: usize, y1: usize) -> RgbImage {
+    let mut data = Vec::with_capacity((x1 - x0) * (y1 - y0) * 3);
+    for y in y0..y1 {
+        data.extend_from_slice(&img.data[(y * img.width + x0) * 3..(y * img.width + x1) * 3]);
+    }
+    RgbImage {
+        width: x1 - x0,
+        height: y1 - y0,
+        data,
+    }
 }

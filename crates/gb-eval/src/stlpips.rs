@@ -248,19 +248,6 @@ impl StLpips {
     }
 }
 
-/// The crop `x0..x1`, `y0..y1` of an image (bounds already checked).
-pub(crate) fn crop(img: &RgbImage, x0: usize, y0: usize, x1: usize, y1: usize) -> RgbImage {
-    let mut data = Vec::with_capacity((x1 - x0) * (y1 - y0) * 3);
-    for y in y0..y1 {
-        data.extend_from_slice(&img.data[(y * img.width + x0) * 3..(y * img.width + x1) * 3]);
-    }
-    RgbImage {
-        width: x1 - x0,
-        height: y1 - y0,
-        data,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

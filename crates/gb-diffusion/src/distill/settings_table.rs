@@ -19,7 +19,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::guidance::GuidanceMethod;
+use super::guidance_method::GuidanceMethod;
 use super::step::DistillSettings;
 use super::timestep::{TimestepConfig, Weighting};
 

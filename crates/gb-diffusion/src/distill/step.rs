@@ -11,7 +11,8 @@ use super::diagnostics::StepDiagnostics;
 use super::eps::{EpsBatch, InpaintEpsPredictor};
 use super::error::DistillError;
 use super::gradient::{postprocess, surrogate_loss};
-use super::guidance::{Branch, Guidance, GuidanceMethod};
+use super::guidance::{Branch, Guidance};
+use super::guidance_method::GuidanceMethod;
 use super::noise::normal_tensor;
 use super::timestep::{fraction_to_index, weight, TimestepConfig, Weighting};
 

@@ -5,31 +5,12 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use burn::module::{LoraAdapter, Module, Param, Reparameterizer};
 use burn::store::ModuleSnapshot;
 use burn::tensor::{Tensor, TensorData};
-use serde::{Deserialize, Serialize};
 
 use super::conv_adapter::ConvLoraAdapter;
+pub use super::file::LoraComponent;
 use super::file::{LoraEntry, LoraFile};
 use super::LoraError;
 use crate::checkpoint::KeymapSection;
-
-/// The network a LoRA entry belongs to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-pub enum LoraComponent {
-    /// The CLIP text encoder (`text_encoder.` / `lora_te_`).
-    TextEncoder,
-    /// The U-Net (`unet.` / `lora_unet_`).
-    Unet,
-}
-
-impl LoraComponent {
-    /// The diffusers prefix of this component's keys (without the dot).
-    pub fn prefix(self) -> &'static str {
-        match self {
-            LoraComponent::TextEncoder => "text_encoder",
-            LoraComponent::Unet => "unet",
-        }
-    }
-}
 
 /// Factors of one target in Burn layout, with their scale.
 struct Factors {

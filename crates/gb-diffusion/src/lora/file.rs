@@ -6,10 +6,29 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use safetensors::SafeTensors;
+use serde::{Deserialize, Serialize};
 
-use super::apply::LoraComponent;
 use super::tensor_io::view_to_f32;
 use super::LoraError;
+
+/// The network a LoRA entry belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub enum LoraComponent {
+    /// The CLIP text encoder (`text_encoder.` / `lora_te_`).
+    TextEncoder,
+    /// The U-Net (`unet.` / `lora_unet_`).
+    Unet,
+}
+
+impl LoraComponent {
+    /// The diffusers prefix of this component's keys (without the dot).
+    pub fn prefix(self) -> &'static str {
+        match self {
+            LoraComponent::TextEncoder => "text_encoder",
+            LoraComponent::Unet => "unet",
+        }
+    }
+}
 
 /// Suffixes that mark the down (A) factor, longest first.
 const DOWN_SUFFIXES: &[&str] = &[
