@@ -1,6 +1,6 @@
 //! Shared plumbing used by every gb-nerf-rs crate: run-time backend selection
 //! ([`backend`]), crash-safe file writes ([`atomic`]), PNG/JPEG image IO ([`image_io`]),
-//! `.npy` reading and writing ([`npy`]), progress bars that do not fight the log ([`progress`]), one-line error messages
+//! `.npy` reading and writing ([`npy`]), the sectioned checkpoint container ([`sections`]), progress bars that do not fight the log ([`progress`]), one-line error messages
 //! ([`messages`]), the prior's float precision ([`precision`]), row lookups with a parallel
 //! backward ([`indexing`]), content fingerprints for caches ([`fingerprint`]) and, with the `clap` feature, the command lines' value parsers
 //! (`cli`).
@@ -19,6 +19,7 @@ pub mod npy_guard;
 pub mod precision;
 pub mod progress;
 pub mod resample;
+pub mod sections;
 pub mod tensor_values;
 pub mod testdata;
 

@@ -111,46 +111,21 @@ fn invalid(path: &Path, message: impl Into<String>) -> FinetuneError {
 /// Writes a checkpoint atomically.
 pub fn save(path: &Path, parts: &CheckpointParts) -> Result<(), FinetuneError> {
     let meta = serde_json::to_vec(&parts.meta).map_err(|e| invalid(path, e.to_string()))?;
-    let mut out = MAGIC.to_vec();
-    for section in [&meta, &parts.model, &parts.optimizer] {
-        out.extend_from_slice(&(section.len() as u64).to_le_bytes());
-        out.extend_from_slice(section);
-    }
+    let out = gb_core::sections::encode(MAGIC, &[&meta, &parts.model, &parts.optimizer]);
     gb_core::write_atomic(path, &out).map_err(|e| FinetuneError::io(path, e))
 }
 
 /// Reads a checkpoint written by [`save`].
 pub fn load(path: &Path) -> Result<CheckpointParts, FinetuneError> {
     let bytes = std::fs::read(path).map_err(|e| FinetuneError::io(path, e))?;
-    if let Some(old) = OLD_MAGICS.iter().find(|m| bytes.starts_with(m)) {
-        return Err(invalid(
-            path,
-            format!(
-                "written by an older version ({}) that cannot resume exactly; this version \
-                 reads {}: start the run afresh (without --resume, or delete the file)",
-                String::from_utf8_lossy(old).trim(),
-                String::from_utf8_lossy(MAGIC).trim()
-            ),
-        ));
-    }
-    if !bytes.starts_with(MAGIC) {
-        return Err(invalid(path, "not a gb-finetune checkpoint (bad magic)"));
-    }
-    let mut pos = MAGIC.len();
-    let mut sections: Vec<Vec<u8>> = Vec::new();
-    for name in ["metadata", "model", "optimizer"] {
-        let len_bytes: [u8; 8] = bytes
-            .get(pos..pos + 8)
-            .and_then(|s| s.try_into().ok())
-            .ok_or_else(|| invalid(path, format!("truncated before the {name} section")))?;
-        let len = u64::from_le_bytes(len_bytes) as usize;
-        pos += 8;
-        let body = bytes
-            .get(pos..pos.saturating_add(len))
-            .ok_or_else(|| invalid(path, format!("truncated {name} section")))?;
-        sections.push(body.to_vec());
-        pos += len;
-    }
+    let mut sections = gb_core::sections::decode(
+        &bytes,
+        MAGIC,
+        OLD_MAGICS,
+        "gb-finetune",
+        &["metadata", "model", "optimizer"],
+    )
+    .map_err(|m| invalid(path, m))?;
     let optimizer = sections.pop().unwrap_or_default();
     let model = sections.pop().unwrap_or_default();
     let meta: CheckpointMeta = serde_json::from_slice(&sections.pop().unwrap_or_default())

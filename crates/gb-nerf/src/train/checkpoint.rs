@@ -204,45 +204,24 @@ pub fn save(path: &Path, parts: &CheckpointParts) -> Result<(), NerfError> {
         .flat_map(|v| v.to_le_bytes())
         .collect();
     let occupied: Vec<u8> = parts.occupied.iter().map(|o| *o as u8).collect();
-    let mut out = MAGIC.to_vec();
-    for section in [&meta, &parts.model, &parts.optimizer, &occ, &occupied] {
-        out.extend_from_slice(&(section.len() as u64).to_le_bytes());
-        out.extend_from_slice(section);
-    }
+    let out = gb_core::sections::encode(
+        MAGIC,
+        &[&meta, &parts.model, &parts.optimizer, &occ, &occupied],
+    );
     gb_core::write_atomic(path, &out).map_err(|e| err(path, e.to_string()))
 }
 
 /// Reads a checkpoint written by [`save`].
 pub fn load(path: &Path) -> Result<CheckpointParts, NerfError> {
     let bytes = std::fs::read(path).map_err(|e| err(path, e.to_string()))?;
-    if let Some(old) = OLD_MAGICS.iter().find(|m| bytes.starts_with(m)) {
-        return Err(err(
-            path,
-            format!(
-                "written by an older version ({}) that cannot resume exactly; this version \
-                 reads {}: start the run afresh (without --resume, or delete the file)",
-                String::from_utf8_lossy(old).trim(),
-                String::from_utf8_lossy(MAGIC).trim()
-            ),
-        ));
-    }
-    if !bytes.starts_with(MAGIC) {
-        return Err(err(path, "not a gb-nerf checkpoint (bad magic)"));
-    }
-    let mut pos = MAGIC.len();
-    let mut sections = Vec::new();
-    for name in ["metadata", "model", "optimizer", "occupancy", "occupied"] {
-        let len_bytes = bytes
-            .get(pos..pos + 8)
-            .ok_or_else(|| err(path, format!("truncated before the {name} section")))?;
-        let len = u64::from_le_bytes(len_bytes.try_into().unwrap_or([0; 8])) as usize;
-        pos += 8;
-        let body = bytes
-            .get(pos..pos.saturating_add(len))
-            .ok_or_else(|| err(path, format!("truncated {name} section")))?;
-        sections.push(body.to_vec());
-        pos += len;
-    }
+    let mut sections = gb_core::sections::decode(
+        &bytes,
+        MAGIC,
+        OLD_MAGICS,
+        "gb-nerf",
+        &["metadata", "model", "optimizer", "occupancy", "occupied"],
+    )
+    .map_err(|m| err(path, m))?;
     let meta: CheckpointMeta =
         serde_json::from_slice(&sections[0]).map_err(|e| err(path, format!("metadata: {e}")))?;
     if sections[3].len() % 4 != 0 {
