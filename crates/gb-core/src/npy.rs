@@ -127,8 +127,8 @@ pub fn fortran_to_c<V: Copy + Default>(shape: &[u64], data: &[V]) -> Vec<V> {
     out
 }
 
-/// Encodes a C-order `f64` array as `.npy` bytes (`<f8`).
-pub fn encode_f64(shape: &[u64], data: &[f64]) -> std::io::Result<Vec<u8>> {
+/// Encodes a C-order array as `.npy` bytes, in numpy's default dtype of `T`.
+fn encode<T: npyz::AutoSerialize + Copy>(shape: &[u64], data: &[T]) -> std::io::Result<Vec<u8>> {
     let mut buf = Vec::new();
     let mut w = npyz::WriteOptions::new()
         .default_dtype()
@@ -140,17 +140,14 @@ pub fn encode_f64(shape: &[u64], data: &[f64]) -> std::io::Result<Vec<u8>> {
     Ok(buf)
 }
 
+/// Encodes a C-order `f64` array as `.npy` bytes (`<f8`).
+pub fn encode_f64(shape: &[u64], data: &[f64]) -> std::io::Result<Vec<u8>> {
+    encode(shape, data)
+}
+
 /// Encodes a C-order `f32` array as `.npy` bytes (`<f4`).
 pub fn encode_f32(shape: &[u64], data: &[f32]) -> std::io::Result<Vec<u8>> {
-    let mut buf = Vec::new();
-    let mut w = npyz::WriteOptions::new()
-        .default_dtype()
-        .shape(shape)
-        .writer(&mut buf)
-        .begin_nd()?;
-    w.extend(data.iter().copied())?;
-    w.finish()?;
-    Ok(buf)
+    encode(shape, data)
 }
 
 #[cfg(test)]
