@@ -62,6 +62,25 @@ fn camera_errors(truth: &Scene, got: &Scene) -> (f64, f64) {
     (rot, centre_err)
 }
 
+/// Asserts the captured cameras within 1.5 degrees of relative rotation and 5% of centre
+/// distance of the generator's ([`camera_errors`]), printing both under `label`.
+fn assert_cameras_match(truth: &Scene, got: &Scene, label: &str) {
+    let (rot, centre) = camera_errors(truth, got);
+    eprintln!(
+        "{label}: relative rotation error {rot:.3} deg, centre error {:.3}%",
+        100.0 * centre
+    );
+    assert!(
+        rot < 1.5,
+        "relative rotations off by up to {rot:.3} degrees"
+    );
+    assert!(
+        centre < 0.05,
+        "centre distances off by up to {:.2}%",
+        100.0 * centre
+    );
+}
+
 /// The procedural `stairs` (seed 5) written into a temporary folder and captured with the
 /// generator's focal length given (known as a calibrated camera's would be: COLMAP's own
 /// estimate on these 200x150 views was within 3.4% in ten runs of eleven, but once converged
@@ -134,22 +153,9 @@ fn capture_registers_every_view_with_the_generator_s_cameras() {
             a.name
         );
     }
-    let (rot, centre) = camera_errors(&truth, &got);
-    eprintln!(
-        "capture: relative rotation error {rot:.3} deg, centre error {:.3}%",
-        100.0 * centre
-    );
     // measured over twelve runs with the focal length given: 0.35 to 0.50 degrees, 1.8% to
     // 2.4% (maxima over 276 pairs of 200x150 views)
-    assert!(
-        rot < 1.5,
-        "relative rotations off by up to {rot:.3} degrees"
-    );
-    assert!(
-        centre < 0.05,
-        "centre distances off by up to {:.2}%",
-        100.0 * centre
-    );
+    assert_cameras_match(&truth, &got, "capture");
     // the sparse model gives the views depth
     assert!(got
         .views
@@ -238,18 +244,5 @@ fn a_radial_lens_is_undistorted_with_its_masks() {
             );
         }
     }
-    let (rot, centre) = camera_errors(&truth, &got);
-    eprintln!(
-        "capture --camera radial: relative rotation error {rot:.3} deg, centre error {:.3}%",
-        100.0 * centre
-    );
-    assert!(
-        rot < 1.5,
-        "relative rotations off by up to {rot:.3} degrees"
-    );
-    assert!(
-        centre < 0.05,
-        "centre distances off by up to {:.2}%",
-        100.0 * centre
-    );
+    assert_cameras_match(&truth, &got, "capture --camera radial");
 }

@@ -146,23 +146,20 @@ pub fn write_scene(
                             "{name} is undistorted but not in the photos' model"
                         ))
                     })?;
+                // each mask's size was checked against its photo's before COLMAP ran
                 let mask = match mask {
                     Some(m) => {
                         let (w, h, bits) = mask_bits(m)?;
-                        if (w as u64, h as u64) != (photo_camera.width, photo_camera.height) {
-                            return Err(CaptureError::MaskSize {
-                                path: m.clone(),
-                                mask_w: w,
-                                mask_h: h,
-                                image_w: photo_camera.width as usize,
-                                image_h: photo_camera.height as usize,
-                            });
-                        }
                         let mapped = crate::undistort::undistort_mask(photo_camera, camera, &bits)
                             .ok_or_else(|| {
                                 bad_model(format!(
-                                    "cannot map a mask from a {} camera to a {} one",
-                                    photo_camera.model, camera.model
+                                    "cannot map the {w}x{h} mask {} from a {} camera ({}x{}) \
+                                     to a {} one",
+                                    m.display(),
+                                    photo_camera.model,
+                                    photo_camera.width,
+                                    photo_camera.height,
+                                    camera.model
                                 ))
                             })?;
                         Some((camera.width as usize, camera.height as usize, mapped))

@@ -57,19 +57,46 @@ pub fn undistort(
     })
 }
 
+/// The map from the undistorted `PINHOLE` camera's pixels to the distorted photo's (a
+/// `RADIAL`, `SIMPLE_RADIAL` or pinhole camera), its parameters read once.
+struct Mapping {
+    /// `fx, fy, cx, cy` of the undistorted camera.
+    to: (f64, f64, f64, f64),
+    /// `f, cx, cy, k1, k2` of the photo's camera.
+    from: (f64, f64, f64, f64, f64),
+    /// The photo's size.
+    size: (f64, f64),
+}
+
+impl Mapping {
+    /// `None` when either camera is not of the models above.
+    fn new(from: &Camera, to: &Camera) -> Option<Self> {
+        Some(Self {
+            to: pinhole(to)?,
+            from: radial(from)?,
+            size: (from.width as f64, from.height as f64),
+        })
+    }
+
+    /// The photo's pixel that the centre of pixel `(x, y)` sees; `None` outside the photo.
+    fn source(&self, x: usize, y: usize) -> Option<(usize, usize)> {
+        let (fx, fy, cx, cy) = self.to;
+        let (f, pcx, pcy, k1, k2) = self.from;
+        let u = (x as f64 + 0.5 - cx) / fx;
+        let v = (y as f64 + 0.5 - cy) / fy;
+        let r2 = u * u + v * v;
+        let d = 1.0 + k1 * r2 + k2 * r2 * r2;
+        let (px, py) = (f * u * d + pcx, f * v * d + pcy);
+        let inside = px >= 0.0 && py >= 0.0 && px < self.size.0 && py < self.size.1;
+        inside.then_some((px as usize, py as usize))
+    }
+}
+
 /// The pixel of the distorted image `from` (a `RADIAL`, `SIMPLE_RADIAL` or pinhole camera)
 /// that the centre of pixel `(x, y)` of the undistorted `PINHOLE` camera `to` sees; `None`
 /// outside `from`'s image. COLMAP's convention: pixel `(i, j)` covers `[i, i + 1) x [j, j + 1)`.
 pub fn source_pixel(from: &Camera, to: &Camera, x: usize, y: usize) -> Option<(usize, usize)> {
-    let (fx, fy, cx, cy) = pinhole(to)?;
-    let u = (x as f64 + 0.5 - cx) / fx;
-    let v = (y as f64 + 0.5 - cy) / fy;
-    let (f, pcx, pcy, k1, k2) = radial(from)?;
-    let r2 = u * u + v * v;
-    let d = 1.0 + k1 * r2 + k2 * r2 * r2;
-    let (px, py) = (f * u * d + pcx, f * v * d + pcy);
-    let inside = px >= 0.0 && py >= 0.0 && px < from.width as f64 && py < from.height as f64;
-    inside.then_some((px as usize, py as usize))
+    Mapping::new(from, to)?.source(x, y)
 }
 
 /// `(fx, fy, cx, cy)` of a `PINHOLE` camera.
@@ -92,16 +119,20 @@ fn radial(c: &Camera) -> Option<(f64, f64, f64, f64, f64)> {
 }
 
 /// The mask `bits` (`from`'s size, row-major, 1 on the object) as the undistorted camera `to`
-/// sees it; `None` when either camera is not of the models above.
+/// sees it; `None` when either camera is not of the models above or `bits` is not `from`'s
+/// size.
 pub fn undistort_mask(from: &Camera, to: &Camera, bits: &[f32]) -> Option<Vec<f32>> {
-    pinhole(to)?;
-    radial(from)?;
+    let map = Mapping::new(from, to)?;
+    let from_w = from.width as usize;
+    if bits.len() != from_w * from.height as usize {
+        return None;
+    }
     let (w, h) = (to.width as usize, to.height as usize);
     let mut out = vec![0.0; w * h];
     for y in 0..h {
         for x in 0..w {
-            if let Some((i, j)) = source_pixel(from, to, x, y) {
-                out[y * w + x] = bits[j * from.width as usize + i];
+            if let Some((i, j)) = map.source(x, y) {
+                out[y * w + x] = bits[j * from_w + i];
             }
         }
     }

@@ -91,6 +91,14 @@ pub fn read_npy(bytes: &[u8]) -> Result<NpyArray, NpyError> {
         (T::Int, 8) => (NpyKind::Int, values!(i64)),
         _ => return Err(NpyError::Dtype(dtype)),
     };
+    // npyz reads exactly the shape's count or fails; say so rather than reorder a short buffer
+    let count = shape.iter().try_fold(1u64, |n, &d| n.checked_mul(d));
+    if count != Some(values.len() as u64) {
+        return Err(NpyError::Data(format!(
+            "{} values for shape {shape:?}",
+            values.len()
+        )));
+    }
     let data = match order {
         npyz::Order::C => values,
         npyz::Order::Fortran => fortran_to_c(&shape, &values),
@@ -104,8 +112,9 @@ pub fn read_npy(bytes: &[u8]) -> Result<NpyArray, NpyError> {
 }
 
 /// Reorders a Fortran-order (first axis fastest) buffer of `shape` to C order. A buffer
-/// shorter than the shape declares reads as zeros past its end.
-pub fn fortran_to_c<V: Copy + Default>(shape: &[u64], data: &[V]) -> Vec<V> {
+/// shorter than the shape declares reads as zeros past its end ([`read_npy`] refuses one
+/// before it gets here).
+fn fortran_to_c<V: Copy + Default>(shape: &[u64], data: &[V]) -> Vec<V> {
     let dims: Vec<usize> = shape.iter().map(|&d| d as usize).collect();
     let mut out = vec![V::default(); data.len()];
     let mut idx = vec![0usize; dims.len()];

@@ -69,8 +69,8 @@ pub struct Args {
 
 /// Runs the command: one call of [`gb_inpaint::run::run`], then the means on stdout.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // progress bars are on from the command line (`RunSpec::progress` is skipped to true)
     let spec = RunSpec {
-        progress: true,
         program: crate::program_name().into(),
         ..args.spec
     };
