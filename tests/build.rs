@@ -1,16 +1,12 @@
 //! Marks the tests that need the shared test data as ignored when it is missing: the check
-//! lives in gb-core's `testdata.rs`, compiled here as a module (see its docs). Marks the test
+//! lives in the gb-testdata crate (see its docs). Marks the test
 //! of the Slurm array job (`grid_slurm.rs`) as ignored when the build sees no Slurm to test
 //! against: neither `SLURM_CONF` nor `GB_TEST_SLURM` (which `.ci/run` sets) is set; and the
 //! capture test (`capture.rs`) when no `colmap` runs and `GB_TEST_COLMAP` is not set (`.ci/run`
 //! installs COLMAP and sets it, so there a missing COLMAP fails).
 
-#[allow(dead_code)]
-#[path = "../crates/gb-core/src/testdata.rs"]
-mod testdata;
-
 fn main() {
-    testdata::emit_build_script_cfg();
+    gb_testdata::emit_build_script_cfg();
     println!("cargo::rustc-check-cfg=cfg(gb_no_slurm)");
     println!("cargo::rerun-if-env-changed=SLURM_CONF");
     println!("cargo::rerun-if-env-changed=GB_TEST_SLURM");

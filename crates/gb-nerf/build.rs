@@ -1,10 +1,6 @@
 //! Marks the tests that need the shared test data as ignored when it is missing: the check
-//! lives in gb-core's `testdata.rs`, compiled here as a module (see its docs).
-
-#[allow(dead_code)]
-#[path = "../gb-core/src/testdata.rs"]
-mod testdata;
+//! lives in the gb-testdata crate (see its docs).
 
 fn main() {
-    testdata::emit_build_script_cfg();
+    gb_testdata::emit_build_script_cfg();
 }

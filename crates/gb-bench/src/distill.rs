@@ -38,8 +38,12 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let kind = args.device.unwrap_or_default();
     let device = kind.device();
-    let prior = SdPrior::load(&args.prior, &device)
-        .with_context(|| format!("loading the prior from {}", args.prior.display()))?;
+    let prior = SdPrior::load(
+        &args.prior,
+        &gb_diffusion::distill::PriorOptions::default(),
+        &device,
+    )
+    .with_context(|| format!("loading the prior from {}", args.prior.display()))?;
     let res = args.resolution.unwrap_or(prior.resolution);
     let repeats = args.repeats.max(1);
     let pixels: Vec<f32> = (0..3 * res * res)

@@ -28,8 +28,8 @@ use anyhow::{bail, Context};
 use burn::tensor::{Distribution, Tensor};
 use gb_core::{BackendKind, Precision};
 use gb_diffusion::config::ClipTextConfig;
-use gb_diffusion::distill::EpsBatch;
-use gb_inpaint::{GuidancePrior, GuidedTrainer, MethodConfig, Modality, SceneCaptions};
+use gb_diffusion::distill::{EpsBatch, InpaintEpsPredictor, LatentEncoder, PromptEncoder};
+use gb_inpaint::{GuidedTrainer, MethodConfig, Modality, SceneCaptions};
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
 use gb_nerf::scene::LoadOptions;
 use gb_nerf::train::NerfConfig;
@@ -232,7 +232,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     tracing::info!(prior = %args.prior, device = %kind, "building the prior");
     let build = Instant::now();
     let prior = match args.prior.as_str() {
-        "sd15" => GuidancePrior::random(
+        "sd15" => gb_inpaint::prior::random_prior(
             &super::unet::sd15_inpainting_unet()?,
             &super::unet::sd15_vae()?,
             &sd15_text_encoder(),
@@ -242,7 +242,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?,
         spec => {
             let dir = gb_diffusion::checkpoint::resolve_prior(spec)?;
-            GuidancePrior::load(&dir, None, precision, &device)?
+            gb_inpaint::prior::load_prior(
+                &dir,
+                &gb_inpaint::prior::PriorOptions {
+                    precision: Some(precision),
+                    ..Default::default()
+                },
+                &device,
+            )?
         }
     };
     let build_s = build.elapsed().as_secs_f64();

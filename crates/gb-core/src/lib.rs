@@ -21,7 +21,9 @@ pub mod progress;
 pub mod resample;
 pub mod sections;
 pub mod tensor_values;
-pub mod testdata;
+/// Where the shared test data lives (the gb-testdata crate, also the build scripts' helper).
+pub use gb_testdata as testdata;
+pub use gb_testdata::shared_data_guard;
 
 pub use assets::{assets_dir, tiny_prior_dir};
 pub use atomic::write_atomic;

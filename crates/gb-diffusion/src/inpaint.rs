@@ -14,13 +14,9 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 
 use crate::checkpoint::CheckpointError;
-use crate::clip::text_model::ClipTextModel;
 use crate::clip::{encode_prompts, PromptError};
-use crate::config::{SchedulerConfig, UNet2DConditionConfig};
-use crate::models::{AutoencoderKL, UNet2DConditionModel};
 use crate::pipeline::{ComponentError, SdComponents};
 use crate::scheduler::{DdimScheduler, SchedulerError};
-use crate::tokenizer::ClipTokenizer;
 
 /// Error of the inpainting sampler.
 #[derive(Debug, thiserror::Error)]
@@ -62,32 +58,13 @@ pub enum InpaintError {
     Lora(#[from] crate::lora::LoraError),
 }
 
-/// A loaded inpainting prior: tokenizer, text encoder, U-Net, VAE and DDIM schedule.
-pub struct InpaintPrior {
-    /// CLIP tokenizer of `tokenizer/`.
-    pub tokenizer: ClipTokenizer,
-    /// CLIP text encoder of `text_encoder/`.
-    pub text_encoder: ClipTextModel,
-    /// The inpainting U-Net of `unet/` (9 input channels for Stable Diffusion's 4-channel
-    /// latents).
-    pub unet: UNet2DConditionModel,
-    /// Its config.
-    pub unet_config: UNet2DConditionConfig,
-    /// The VAE of `vae/`.
-    pub vae: AutoencoderKL,
-    /// Image-to-latent down-sampling factor.
-    pub vae_scale_factor: usize,
-    /// `scheduler/scheduler_config.json` (SD-1.5 DDIM defaults when absent).
-    pub scheduler_config: SchedulerConfig,
-    /// The device everything runs on (no autodiff).
-    pub device: Device,
-}
-
-impl InpaintPrior {
+/// The 2D sampler's side of the one loaded-networks type: an inpainting folder, its LoRA,
+/// its prompts.
+impl SdComponents {
     /// Loads every component of a diffusers inpainting folder onto `device`
     /// ([`SdComponents::load`]); a U-Net that is not an inpainting U-Net for the VAE's
     /// latents is refused.
-    pub fn load(root: &Path, device: &Device) -> Result<Self, InpaintError> {
+    pub fn load_inpainting(root: &Path, device: &Device) -> Result<Self, InpaintError> {
         let c = SdComponents::load(root, device, device)?;
         let latent = c.vae_config.latent_channels;
         if !c.unet_config.is_inpainting_for(latent) {
@@ -98,32 +75,16 @@ impl InpaintPrior {
                 latent,
             });
         }
-        Ok(Self {
-            tokenizer: c.tokenizer,
-            text_encoder: c.text_encoder,
-            unet: c.unet,
-            unet_config: c.unet_config,
-            vae_scale_factor: c.vae_config.scale_factor(),
-            vae: c.vae,
-            scheduler_config: c.scheduler,
-            device: device.clone(),
-        })
+        Ok(c)
     }
 
     /// Attaches the LoRA file `path` to the U-Net and the text encoder and merges it into
     /// their weights. Returns the prior and the number of adapted weights (an error when the
     /// file adapts none of them).
-    pub fn with_lora(mut self, path: &Path) -> Result<(Self, usize), InpaintError> {
+    pub fn with_lora(self, path: &Path) -> Result<(Self, usize), InpaintError> {
         let file = crate::lora::LoraFile::read(path)?;
-        let merged = crate::lora::merge_pipeline_lora(
-            self.unet,
-            &self.unet_config,
-            self.text_encoder,
-            &file,
-        )?;
-        self.unet = merged.unet;
-        self.text_encoder = merged.text_encoder;
-        Ok((self, merged.unet_weights + merged.text_encoder_weights))
+        let (merged, counts) = self.merge_lora(&file)?;
+        Ok((merged, counts.unet + counts.text_encoder))
     }
 
     /// Text embeddings `[n, 77, d]` of `prompts` (`last_hidden_state`).
@@ -180,10 +141,10 @@ pub struct InpaintConditioning {
 /// 0.5, the masked image is the image in `[-1, 1]` with the masked pixels set to 0, and the
 /// latent-size mask is nearest-neighbour sampled (`F.interpolate`, pixel `(i f, j f)`).
 pub fn prepare_conditioning(
-    prior: &InpaintPrior,
+    prior: &SdComponents,
     req: &InpaintRequest,
 ) -> Result<InpaintConditioning, InpaintError> {
-    let (w, h, f) = (req.width, req.height, prior.vae_scale_factor);
+    let (w, h, f) = (req.width, req.height, prior.vae_factor());
     if req.rgb.len() != w * h * 3 || req.mask.len() != w * h {
         return Err(InpaintError::Size(format!(
             "image has {} values and mask {} for {w}x{h}",
@@ -260,12 +221,12 @@ pub fn seeded_normal(n: usize, seed: u64) -> Vec<f32> {
 /// Runs DDIM inpainting and returns the image `[1, 3, h, w]` in `[0, 1]`. `on_step` is
 /// called after each step with its index and timestep.
 pub fn inpaint(
-    prior: &InpaintPrior,
+    prior: &SdComponents,
     req: &InpaintRequest,
     mut on_step: impl FnMut(usize, usize),
 ) -> Result<Tensor<4>, InpaintError> {
     let cond = prepare_conditioning(prior, req)?;
-    let f = prior.vae_scale_factor;
+    let f = prior.vae_factor();
     let (lh, lw) = (req.height / f, req.width / f);
     let c = prior.vae.latent_channels;
     let device = &prior.device;
@@ -279,7 +240,7 @@ pub fn inpaint(
         }
         None => seeded_normal(c * lh * lw, req.seed),
     };
-    let mut scheduler = DdimScheduler::new(prior.scheduler_config.clone());
+    let mut scheduler = DdimScheduler::new(prior.scheduler.clone());
     scheduler.set_timesteps(req.steps)?;
     // DDIM's init_noise_sigma is 1.
     let mut latents = Tensor::<4>::from_data(TensorData::new(init, [1, c, lh, lw]), device);

@@ -1,9 +1,10 @@
 //! The one loader of a diffusers Stable Diffusion folder: [`SdComponents::load`] reads the
 //! tokenizer, text encoder, U-Net, VAE and scheduler (`model_index.json` layout, `.fp16`
-//! variants, safetensors only) and names the component that failed. Every user of a prior
-//! starts here: the 2D inpainting pipeline ([`crate::inpaint::InpaintPrior`]), the
-//! distillation playground ([`crate::distill::sd_adapter::SdPrior`]), the guided NeRF
-//! (`gb_inpaint::GuidancePrior`) and LoRA fine-tuning (`gb_finetune::train::PriorModels`).
+//! variants, safetensors only) and names the component that failed; [`SdComponents::random`]
+//! builds the same networks with random weights. Every user of a prior starts here: the 2D
+//! inpainting pipeline ([`crate::inpaint`], on [`SdComponents::load_inpainting`]), the
+//! distillation prior of the playground, the guided NeRF and the benchmarks
+//! ([`crate::distill::SdPrior`]), and LoRA fine-tuning (`gb_finetune::train::PriorModels`).
 
 use std::path::{Path, PathBuf};
 
@@ -11,6 +12,7 @@ use burn::tensor::Device;
 
 use crate::checkpoint::{DiffusersFolder, WeightVariant};
 use crate::clip::{load_text_encoder, ClipTextModel};
+use crate::config::ClipTextConfig;
 use crate::config::{AutoencoderKLConfig, SchedulerConfig, UNet2DConditionConfig};
 use crate::lora::{merge_pipeline_lora, LoraError, LoraFile};
 use crate::models::{load_unet, load_vae, AutoencoderKL, UNet2DConditionModel};
@@ -37,7 +39,7 @@ fn component<E: std::error::Error + Send + Sync + 'static>(
 
 /// Every network and config of a diffusers Stable Diffusion folder.
 pub struct SdComponents {
-    /// The folder.
+    /// Where the networks came from: the folder, a recipe folder, or a name (random weights).
     pub root: PathBuf,
     /// CLIP tokenizer of `tokenizer/`.
     pub tokenizer: ClipTokenizer,
@@ -53,6 +55,8 @@ pub struct SdComponents {
     pub vae_config: AutoencoderKLConfig,
     /// `scheduler/scheduler_config.json` (SD-1.5 defaults when absent).
     pub scheduler: SchedulerConfig,
+    /// The device of the U-Net and the text encoder (the VAE's may be its autodiff version).
+    pub device: Device,
 }
 
 /// How many weights a LoRA adapted.
@@ -94,7 +98,36 @@ impl SdComponents {
             vae,
             vae_config,
             scheduler,
+            device: device.clone(),
         })
+    }
+
+    /// Networks of the given configs with random weights (the U-Net and text encoder on
+    /// `device`, the VAE on `vae_device`), named `root`: a prior at a real model's size
+    /// where no checkpoint is at hand, whose cost is the real one and whose scores mean
+    /// nothing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn random(
+        root: PathBuf,
+        tokenizer: ClipTokenizer,
+        unet: &UNet2DConditionConfig,
+        vae: &AutoencoderKLConfig,
+        text: &ClipTextConfig,
+        scheduler: SchedulerConfig,
+        device: &Device,
+        vae_device: &Device,
+    ) -> Self {
+        Self {
+            root,
+            tokenizer,
+            text_encoder: ClipTextModel::new(text, device),
+            unet: UNet2DConditionModel::new(unet, device),
+            unet_config: unet.clone(),
+            vae: AutoencoderKL::new(vae, vae_device),
+            vae_config: vae.clone(),
+            scheduler,
+            device: device.clone(),
+        }
     }
 
     /// Attaches the LoRA `file` to the U-Net and the text encoder and merges it into their

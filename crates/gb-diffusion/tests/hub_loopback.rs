@@ -27,7 +27,7 @@ use gb_diffusion::checkpoint::hub::{
     download, resolve, resolve_cached, HubSettings, CACHE_ENV, ENDPOINT_ENV, OFFLINE_ENV, TOKEN_ENV,
 };
 use gb_diffusion::distill::sd_adapter::SdPrior;
-use gb_diffusion::inpaint::InpaintPrior;
+use gb_diffusion::pipeline::SdComponents;
 
 const COMMIT: &str = "0123456789abcdef0123456789abcdef01234567";
 const FULL_VAE: &str = "vae/diffusion_pytorch_model.safetensors";
@@ -438,10 +438,21 @@ fn downloads_a_loadable_pipeline_then_works_offline() {
     // The snapshot is found offline and loads as both priors.
     assert_eq!(resolve_cached("owner/tiny-sd", cache.path()).unwrap(), dir);
     let device = BackendKind::Flex.device();
-    let prior = InpaintPrior::load(&dir, &device).expect("InpaintPrior from the download");
+    let prior =
+        SdComponents::load_inpainting(&dir, &device).expect("SdComponents from the download");
     assert_eq!(prior.unet_config.in_channels, 9);
-    let sd = SdPrior::load(&dir, &device).expect("SdPrior from the download");
-    let local = SdPrior::load(&pipeline(), &device).unwrap();
+    let sd = SdPrior::load(
+        &dir,
+        &gb_diffusion::distill::PriorOptions::default(),
+        &device,
+    )
+    .expect("SdPrior from the download");
+    let local = SdPrior::load(
+        &pipeline(),
+        &gb_diffusion::distill::PriorOptions::default(),
+        &device,
+    )
+    .unwrap();
     assert_eq!(sd.resolution, local.resolution);
 
     // Offline first: resolving again asks nothing; a refresh asks only for the listing.
@@ -477,7 +488,12 @@ fn downloads_a_loadable_pipeline_then_works_offline() {
     let offline = download("owner/tiny-sd", &online).unwrap();
     assert_eq!(offline, dir);
     assert_eq!(resolve("owner/tiny-sd", &online).unwrap(), dir);
-    SdPrior::load(&offline, &device).expect("SdPrior offline");
+    SdPrior::load(
+        &offline,
+        &gb_diffusion::distill::PriorOptions::default(),
+        &device,
+    )
+    .expect("SdPrior offline");
     let err = download("owner/never-cached", &online)
         .unwrap_err()
         .to_string();
@@ -578,7 +594,7 @@ fn a_component_with_only_fp16_weights_downloads_them() {
     );
     // The folder loader picks the `.fp16` file when it is the only one.
     let device = BackendKind::Flex.device();
-    InpaintPrior::load(&dir, &device).expect("prior with an fp16-named VAE");
+    SdComponents::load_inpainting(&dir, &device).expect("prior with an fp16-named VAE");
 }
 
 #[test]

@@ -4,7 +4,8 @@
 use crate::sd_image_common;
 
 use gb_core::{heavy_test_backends, read_gray, read_rgb};
-use gb_diffusion::inpaint::{inpaint, prepare_conditioning, InpaintPrior, InpaintRequest};
+use gb_diffusion::inpaint::{inpaint, prepare_conditioning, InpaintRequest};
+use gb_diffusion::pipeline::SdComponents;
 use sd_image_common::{fixture, max_abs_err, read_f32};
 
 const IO: &str = "pipeline_io.safetensors";
@@ -32,7 +33,8 @@ fn inpainting_matches_diffusers_pipeline() {
     let req = request();
     for kind in heavy_test_backends() {
         let device = kind.device();
-        let prior = InpaintPrior::load(&fixture("pipeline"), &device).expect("load prior");
+        let prior =
+            SdComponents::load_inpainting(&fixture("pipeline"), &device).expect("load prior");
         let cond = prepare_conditioning(&prior, &req).unwrap();
         let (want, shape) = read_f32(IO, "masked_image_latents");
         let err = max_abs_err(cond.masked_image_latents, &want, &shape);
@@ -51,7 +53,7 @@ fn inpainting_matches_diffusers_pipeline() {
 #[test]
 fn sizes_that_do_not_fit_the_vae_are_rejected() {
     let device = gb_core::BackendKind::Ndarray.device();
-    let prior = InpaintPrior::load(&fixture("pipeline"), &device).unwrap();
+    let prior = SdComponents::load_inpainting(&fixture("pipeline"), &device).unwrap();
     let mut req = request();
     req.width = 30;
     req.height = 30;
@@ -66,7 +68,7 @@ fn sizes_that_do_not_fit_the_vae_are_rejected() {
 
 #[test]
 fn text_to_image_unet_is_not_an_inpainting_prior() {
-    let err = match InpaintPrior::load(
+    let err = match SdComponents::load_inpainting(
         &fixture("unet_sd2"),
         &gb_core::BackendKind::Ndarray.device(),
     ) {
@@ -81,7 +83,7 @@ fn blending_the_known_region_pins_it_to_the_image_latent_whatever_the_noise() {
     // nothing to repaint: with blending the final latent is the image's own latent, so two
     // noise seeds decode to the same image; without it they differ
     let device = gb_core::BackendKind::Flex.device();
-    let prior = InpaintPrior::load(&fixture("pipeline"), &device).unwrap();
+    let prior = SdComponents::load_inpainting(&fixture("pipeline"), &device).unwrap();
     let run = |seed: u64, blend: bool| {
         let mut req = request();
         req.mask = vec![0.0; req.mask.len()];

@@ -10,7 +10,7 @@
 //! `cargo xtask finetune --synthetic --base tiny --validate-only` reproduces them.
 
 use gb_core::BackendKind;
-use gb_diffusion::inpaint::InpaintPrior;
+use gb_diffusion::pipeline::SdComponents;
 use gb_finetune::captions::CaptionMode;
 use gb_finetune::masks::MaskConfig;
 use gb_finetune::synthetic::SyntheticPairs;
@@ -47,7 +47,7 @@ fn report(lora: bool) -> ValidationReport {
     let dir = gb_core::tiny_prior_dir();
     let device = BackendKind::Flex.device();
     let val = held_out();
-    let prior = InpaintPrior::load(&dir, &device).expect("the shipped tiny prior loads");
+    let prior = SdComponents::load_inpainting(&dir, &device).expect("the shipped tiny prior loads");
     let prior = if lora {
         prior
             .with_lora(&dir.join("pytorch_lora_weights.safetensors"))
@@ -139,7 +139,8 @@ const AUTOENCODER_PSNR_FLOOR: f64 = 26.0;
 #[test]
 fn the_shipped_autoencoder_reconstructs_the_held_out_pairs() {
     let device = BackendKind::Flex.device();
-    let prior = InpaintPrior::load(&gb_core::tiny_prior_dir(), &device).expect("prior loads");
+    let prior =
+        SdComponents::load_inpainting(&gb_core::tiny_prior_dir(), &device).expect("prior loads");
     let psnr = reconstruction_psnr(&prior.vae, &held_out(), 64, &device).expect("runs");
     eprintln!("autoencoder PSNR {psnr:.2} dB");
     assert!(psnr > AUTOENCODER_PSNR_FLOOR, "{psnr:.2} dB");

@@ -16,7 +16,8 @@
 use std::path::{Path, PathBuf};
 
 use gb_core::RgbImage;
-use gb_diffusion::inpaint::{inpaint, InpaintPrior, InpaintRequest};
+use gb_diffusion::inpaint::{inpaint, InpaintRequest};
+use gb_diffusion::pipeline::SdComponents;
 use gb_nerf::render::rays::crop_pixels;
 use gb_nerf::scene::{Scene, Split};
 use gb_nerf::train::data::prepare_view;
@@ -137,7 +138,7 @@ pub fn fill_view(
     }
     let prior_dir = gb_diffusion::checkpoint::resolve_prior(&opts.prior)?;
     let device = opts.device.device();
-    let mut prior = InpaintPrior::load(&prior_dir, &device)?;
+    let mut prior = SdComponents::load_inpainting(&prior_dir, &device)?;
     let lora = match &opts.lora {
         Some(list) => list.clone(),
         None => {
@@ -158,7 +159,7 @@ pub fn fill_view(
             })?
             .0;
     }
-    let r = prior.unet_config.native_resolution(prior.vae_scale_factor);
+    let r = prior.unet_config.native_resolution(prior.vae_factor());
     let geometry = CropGeometry::new(&full, opts.margin, r).ok_or_else(|| {
         view_error(
             view,

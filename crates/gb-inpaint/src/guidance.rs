@@ -7,13 +7,13 @@
 
 use burn::tensor::Tensor;
 use gb_diffusion::distill::{
-    Branch, DistillSettings, InpaintEpsPredictor, LatentTarget, OracleEps, PromptEmbeddings,
-    ScoreDistiller, StepDiagnostics,
+    Branch, DistillSettings, InpaintEpsPredictor, LatentEncoder, LatentTarget, OracleEps,
+    PromptEmbeddings, ScoreDistiller, StepDiagnostics,
 };
 use serde::Serialize;
 
 use crate::error::InpaintError;
-use crate::prior::GuidancePrior;
+use crate::prior::SdPrior;
 
 /// Which image a term guides.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -67,7 +67,7 @@ pub struct TermOutput {
 /// resumed run draws the same timesteps.
 pub fn distiller_for(
     settings: &DistillSettings,
-    prior: &GuidancePrior,
+    prior: &SdPrior,
     seed: u64,
     iteration: usize,
 ) -> Result<ScoreDistiller, InpaintError> {
@@ -81,7 +81,7 @@ pub fn distiller_for(
 #[allow(clippy::too_many_arguments)]
 pub fn guidance_term(
     distiller: &mut ScoreDistiller,
-    prior: &GuidancePrior,
+    prior: &SdPrior,
     image: Tensor<4>,
     cond: &TermConditioning<'_>,
     lambda: f64,
@@ -99,7 +99,7 @@ pub fn guidance_term(
     };
     let branches = distiller.guidance().branches();
     let oracle = cond.oracle.as_ref().map(|(clean, answered)| OracleEps {
-        inner: prior.unet.as_ref(),
+        inner: &prior.unet,
         clean: clean.clone(),
         alphas: &prior.alphas,
         branches,
@@ -107,7 +107,7 @@ pub fn guidance_term(
     });
     let unet: &dyn InpaintEpsPredictor = match &oracle {
         Some(o) => o,
-        None => prior.unet.as_ref(),
+        None => &prior.unet,
     };
     let out = match at {
         Some((timestep, noise)) => distiller.step_with(unet, target, timestep, noise)?,

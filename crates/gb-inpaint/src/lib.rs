@@ -61,6 +61,6 @@ pub mod visibility;
 pub use error::InpaintError;
 pub use guidance::Modality;
 pub use method::{MethodConfig, PromptOverrides, Prompts, SceneCaptions};
-pub use prior::{lora_for, GuidancePrior, PriorInfo};
+pub use prior::{load_prior, lora_for, PriorInfo, PriorOptions, SdPrior};
 pub use run::{export_run, run, RunSpec, RunSummary};
 pub use trainer::{FitOptions, FitSummary, GuidedTrainer, StepRecord, TermRecord};

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use gb_core::{BackendKind, RgbImage};
 use gb_diffusion::distill::{Branch, GuidanceMethod, PriorInputMode};
 use gb_inpaint::auto::{choose_weights, pseudo_hole, AutoInputs, Weight};
-use gb_inpaint::{GuidancePrior, MethodConfig, PromptOverrides, SceneCaptions};
+use gb_inpaint::{MethodConfig, PromptOverrides, SceneCaptions};
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
 use gb_nerf::scene::{LoadOptions, Scene, Split};
 use gb_nerf::train::data::TrainData;
@@ -189,7 +189,15 @@ fn choose(s: &Scene, dir: &Path, clean: &Path, out: &Path) -> gb_inpaint::auto::
     let images = gb_inpaint::oracle::load_object_free(s, clean, 1, "[oracle] clean").unwrap();
     let prompts = method.resolve_prompts(&SceneCaptions::read(dir), &PromptOverrides::default());
     let mut prior = Some(
-        GuidancePrior::load(&prior_dir(), None, gb_core::Precision::F32, &KIND.device()).unwrap(),
+        gb_inpaint::prior::load_prior(
+            &prior_dir(),
+            &gb_inpaint::prior::PriorOptions {
+                precision: Some(gb_core::Precision::F32),
+                ..Default::default()
+            },
+            &KIND.device(),
+        )
+        .unwrap(),
     );
     let inputs = AutoInputs {
         scene: s,

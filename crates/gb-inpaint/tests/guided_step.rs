@@ -14,10 +14,9 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::{Tensor, TensorData};
 use gb_core::BackendKind;
-use gb_diffusion::distill::PriorInputMode;
+use gb_diffusion::distill::{LatentEncoder, PriorInputMode};
 use gb_inpaint::{
-    FitOptions, GuidancePrior, GuidedTrainer, InpaintError, MethodConfig, Modality,
-    PromptOverrides, SceneCaptions,
+    FitOptions, GuidedTrainer, InpaintError, MethodConfig, Modality, PromptOverrides, SceneCaptions,
 };
 use gb_nerf::field::NerfField;
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
@@ -65,9 +64,15 @@ fn guided(
     let mut m = MethodConfig::builtin(method).unwrap();
     edit(&mut m);
     let guidance = m.needs_prior().then(|| {
-        let prior =
-            GuidancePrior::load(&prior_dir(), None, gb_core::Precision::F32, &KIND.device())
-                .unwrap();
+        let prior = gb_inpaint::prior::load_prior(
+            &prior_dir(),
+            &gb_inpaint::prior::PriorOptions {
+                precision: Some(gb_core::Precision::F32),
+                ..Default::default()
+            },
+            &KIND.device(),
+        )
+        .unwrap();
         let prompts = m.resolve_prompts(&SceneCaptions::read(dir), &PromptOverrides::default());
         (prior, prompts)
     });

@@ -11,7 +11,7 @@ use gb_inpaint::personalize::{
     fresh_mask_loss, new_trainer, personalize, scene_patches, PersonalizeInputs,
     PersonalizeSettings,
 };
-use gb_inpaint::{GuidancePrior, InpaintError};
+use gb_inpaint::InpaintError;
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
 use gb_nerf::scene::{LoadOptions, Scene, Split};
 
@@ -183,11 +183,13 @@ fn a_run_reuses_its_lora_until_what_it_was_trained_from_changes() {
     let other = personalize(&inputs(&s, &prior, &lora, &reseeded, &out)).unwrap();
     assert!(!other.cached, "another seed must retrain");
     // the prior loads with both LoRAs merged, and says so
-    let p = GuidancePrior::load_personalized(
+    let p = gb_inpaint::prior::load_prior(
         &prior,
-        Some(&lora),
-        Some(&file),
-        gb_core::Precision::F32,
+        &gb_inpaint::prior::PriorOptions {
+            lora: Some(lora.clone()),
+            personal: Some(file.clone()),
+            precision: Some(gb_core::Precision::F32),
+        },
         &BackendKind::Flex.device(),
     )
     .unwrap();

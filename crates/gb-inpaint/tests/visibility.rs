@@ -18,7 +18,7 @@ use gb_core::BackendKind;
 use gb_inpaint::crop::{latent_mask, CropGeometry};
 use gb_inpaint::guidance::Modality;
 use gb_inpaint::visibility::VisibilityConfig;
-use gb_inpaint::{GuidancePrior, GuidedTrainer, MethodConfig, PromptOverrides, SceneCaptions};
+use gb_inpaint::{GuidedTrainer, MethodConfig, PromptOverrides, SceneCaptions};
 use gb_nerf::render::rays::{all_pixels, camera_rays};
 use gb_nerf::scene::procedural::render;
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
@@ -62,8 +62,15 @@ fn trainer(scene: &Scene, dir: &Path, steps: usize, observed_weight: f64) -> Gui
         resolution: 32,
         ..VisibilityConfig::default()
     };
-    let prior =
-        GuidancePrior::load(&prior_dir(), None, gb_core::Precision::F32, &KIND.device()).unwrap();
+    let prior = gb_inpaint::prior::load_prior(
+        &prior_dir(),
+        &gb_inpaint::prior::PriorOptions {
+            precision: Some(gb_core::Precision::F32),
+            ..Default::default()
+        },
+        &KIND.device(),
+    )
+    .unwrap();
     let prompts = m.resolve_prompts(&SceneCaptions::read(dir), &PromptOverrides::default());
     let mut c = NerfConfig::preset("fast").unwrap();
     c.train.steps = steps;

@@ -91,8 +91,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let device = kind.device();
     let prior_dir = gb_diffusion::checkpoint::resolve_prior(&args.prior)?;
-    let prior = SdPrior::load(&prior_dir, &device)
-        .with_context(|| format!("loading the prior from {}", prior_dir.display()))?;
+    let prior = SdPrior::load(
+        &prior_dir,
+        &gb_diffusion::distill::PriorOptions::default(),
+        &device,
+    )
+    .with_context(|| format!("loading the prior from {}", prior_dir.display()))?;
     let resolution = args.resolution.unwrap_or(prior.resolution);
     let guidance = GuidanceMethod::from_weights(&args.method, args.w1, args.w2, args.w3)
         .with_context(|| format!("--method {}: expected sds, csd or bsd", args.method))?;

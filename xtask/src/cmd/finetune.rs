@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use gb_core::BackendKind;
-use gb_diffusion::inpaint::InpaintPrior;
+use gb_diffusion::pipeline::SdComponents;
 use gb_finetune::captions::CaptionMode;
 use gb_finetune::diode::{DiodeDataset, DiodeSplit};
 use gb_finetune::run::{run_finetune, validation_settings, RunOptions};
@@ -244,11 +244,11 @@ fn validate_only(
     plain: &burn::tensor::Device,
 ) -> anyhow::Result<()> {
     let load = || {
-        InpaintPrior::load(base_dir, plain)
+        SdComponents::load_inpainting(base_dir, plain)
             .with_context(|| format!("loading the prior {}", base_dir.display()))
     };
     let prior = load()?;
-    let native = prior.unet_config.native_resolution(prior.vae_scale_factor);
+    let native = prior.unet_config.native_resolution(prior.vae_factor());
     let mut cfg = config_of(args, native)?;
     if args.config.is_none() && args.validation_samples.is_none() {
         cfg.validation_samples = val.len();

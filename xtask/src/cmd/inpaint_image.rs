@@ -5,7 +5,8 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 use gb_core::{read_gray, read_rgb, write_rgb_png, BackendKind, RgbImage};
-use gb_diffusion::inpaint::{inpaint, InpaintPrior, InpaintRequest};
+use gb_diffusion::inpaint::{inpaint, InpaintRequest};
+use gb_diffusion::pipeline::SdComponents;
 use indicatif::ProgressStyle;
 
 /// Arguments of `cargo xtask inpaint-image`.
@@ -76,7 +77,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let kind = args.device.unwrap_or_default();
     let device = kind.device();
     let prior_dir = gb_diffusion::checkpoint::resolve_prior(&args.prior)?;
-    let mut prior = InpaintPrior::load(&prior_dir, &device)
+    let mut prior = SdComponents::load_inpainting(&prior_dir, &device)
         .with_context(|| format!("loading prior {}", prior_dir.display()))?;
     for lora in &args.lora {
         prior = prior

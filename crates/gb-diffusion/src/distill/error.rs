@@ -2,6 +2,10 @@
 
 use super::guidance::Branch;
 
+/// Why a prior path that is not a folder is refused.
+pub const PRIOR_LAYOUT: &str = "not a folder (expected a diffusers layout: model_index.json, \
+    unet/, vae/, text_encoder/, tokenizer/, scheduler/)";
+
 /// Boxed error from an eps-predictor, latent-encoder or prompt-encoder implementation.
 pub type BoxedSourceError = Box<dyn std::error::Error + Send + Sync + 'static>;
 
@@ -86,6 +90,20 @@ pub enum DistillError {
         /// The underlying error.
         #[source]
         source: BoxedSourceError,
+    },
+    /// The prior path is not a folder.
+    #[error("{}: {PRIOR_LAYOUT}", path.display())]
+    PriorFolder {
+        /// The path given.
+        path: std::path::PathBuf,
+    },
+    /// A LoRA file could not be read or does not fit the prior.
+    #[error("{error}")]
+    Lora {
+        /// The LoRA file.
+        path: std::path::PathBuf,
+        /// What is wrong (its message names the file where the file could not be read).
+        error: Box<crate::lora::LoraError>,
     },
     /// The eps predictor (U-Net) failed.
     #[error("eps predictor failed")]

@@ -13,8 +13,8 @@
 //!   `w(t)`; [`alphas`]: the noise schedule.
 //! - [`prior_input`], [`conditioning`], [`view_step`]: crop/resize/paste of the render,
 //!   cached view and prompt conditioning, the step on a rendered view.
-//! - [`sd_adapter`]: the crate's U-Net, VAE encoder and CLIP behind those interfaces, and
-//!   [`sd_adapter::SdPrior`], which loads them from a diffusers folder.
+//! - [`sd_adapter`]: the crate's U-Net and VAE encoder behind those interfaces, and
+//!   [`SdPrior`], the one prior type, which holds them and CLIP's prompt encoder.
 
 pub mod alphas;
 pub mod bsd;
@@ -30,6 +30,7 @@ pub mod noise;
 pub mod oracle;
 pub mod prior_input;
 pub mod sd_adapter;
+mod sd_prior;
 pub mod sds;
 pub mod settings_table;
 pub mod step;
@@ -47,6 +48,7 @@ pub use guidance::{Branch, Guidance};
 pub use guidance_method::GuidanceMethod;
 pub use oracle::OracleEps;
 pub use prior_input::{MaskBox, PriorInputMode};
+pub use sd_prior::{PriorInfo, PriorOptions, SdPrior};
 pub use sds::Sds;
 pub use step::{DistillOutput, DistillSettings, LatentTarget, PromptEmbeddings, ScoreDistiller};
 pub use timestep::{TimestepConfig, TimestepSchedule, Weighting};

@@ -1,21 +1,15 @@
 //! Adapters from the crate's Stable Diffusion modules to the distillation interfaces: the
-//! U-Net as an [`InpaintEpsPredictor`], the VAE encoder as a [`LatentEncoder`], and
-//! [`SdPrior`], which loads them, CLIP's [`crate::clip::ClipPromptEncoder`] and the noise
-//! schedule through the one loader ([`crate::pipeline::SdComponents`]).
+//! U-Net as an [`InpaintEpsPredictor`] and the VAE encoder as a [`LatentEncoder`]. The prior
+//! that holds them is [`SdPrior`].
 
-use std::path::Path;
-
-use burn::module::Module;
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Tensor;
 
 use super::alphas::AlphasCumprod;
 use super::eps::{EpsBatch, InpaintEpsPredictor, LatentEncoder};
 use super::error::DistillError;
-use crate::clip::ClipPromptEncoder;
+pub use super::sd_prior::SdPrior;
 use crate::config::PredictionType;
 use crate::models::{AutoencoderKL, UNet2DConditionModel};
-use crate::pipeline::SdComponents;
-use crate::precision::{cast_frozen, Precision};
 
 /// The SD U-Net as a noise predictor. A 9-channel (inpainting) U-Net receives
 /// `[x_t, mask, masked_image_latents]`; a 4-channel one only `x_t`. A v-prediction U-Net's
@@ -113,61 +107,5 @@ impl LatentEncoder for SdVaeEncoder {
 
     fn downsample_factor(&self) -> usize {
         self.factor
-    }
-}
-
-/// A Stable Diffusion prior loaded for distillation.
-pub struct SdPrior {
-    /// The U-Net (no graph).
-    pub unet: SdUnetEps,
-    /// The VAE encoder (autodiff).
-    pub encoder: SdVaeEncoder,
-    /// The text encoder (no graph).
-    pub text: ClipPromptEncoder,
-    /// `alphas_cumprod` of the scheduler.
-    pub alphas: AlphasCumprod,
-    /// The prior's native image resolution (`unet.sample_size * factor`, 512 for SD 1.5).
-    pub resolution: usize,
-}
-
-impl SdPrior {
-    /// Loads a diffusers folder ([`SdComponents::load`]): the U-Net and text encoder on
-    /// `device`, the VAE on its autodiff version, in the device's default precision
-    /// ([`Precision::default_for`]).
-    pub fn load(root: &Path, device: &Device) -> Result<Self, DistillError> {
-        Self::load_with_precision(root, Precision::default_for(device), device)
-    }
-
-    /// [`Self::load`], the networks computing in `precision` ([`crate::precision`]).
-    pub fn load_with_precision(
-        root: &Path,
-        precision: Precision,
-        device: &Device,
-    ) -> Result<Self, DistillError> {
-        let c = SdComponents::load(root, device, &device.clone().autodiff()).map_err(|e| {
-            DistillError::Load {
-                component: e.component,
-                path: root.to_path_buf(),
-                source: e.source,
-            }
-        })?;
-        let alphas = AlphasCumprod::from_config(&c.scheduler)?;
-        let (factor, resolution) = (c.vae_factor(), c.resolution());
-        Ok(Self {
-            unet: SdUnetEps::new(
-                cast_frozen(c.unet, precision),
-                c.unet_config.in_channels,
-                c.scheduler.prediction_type,
-                alphas.clone(),
-            ),
-            encoder: SdVaeEncoder::new(cast_frozen(c.vae, precision).no_grad(), factor),
-            text: ClipPromptEncoder::new(
-                c.tokenizer,
-                cast_frozen(c.text_encoder, precision),
-                device.clone(),
-            ),
-            alphas,
-            resolution,
-        })
     }
 }

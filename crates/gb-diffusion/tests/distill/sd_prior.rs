@@ -70,7 +70,12 @@ fn vae_encoder_gradient_matches_finite_differences() {
 #[test]
 fn one_step_of_each_method_on_the_tiny_inpainting_prior() {
     let device = BackendKind::Flex.device();
-    let prior = SdPrior::load(&fixture("pipeline"), &device).expect("tiny prior");
+    let prior = SdPrior::load(
+        &fixture("pipeline"),
+        &gb_diffusion::distill::PriorOptions::default(),
+        &device,
+    )
+    .expect("tiny prior");
     assert_eq!(prior.resolution, 32);
     assert_eq!(prior.alphas.len(), 1000);
     let img = read_rgb(&fixture("pipeline_image.png"), None).expect("image");
@@ -170,7 +175,15 @@ fn one_step_of_each_method_on_the_tiny_inpainting_prior() {
 /// `precision` (flex), with its latent gradient norm.
 fn render_gradient(precision: Precision, method: &GuidanceMethod, t: f64) -> (Vec<f32>, f64) {
     let device = BackendKind::Flex.device();
-    let prior = SdPrior::load_with_precision(&fixture("pipeline"), precision, &device).unwrap();
+    let prior = SdPrior::load(
+        &fixture("pipeline"),
+        &gb_diffusion::distill::PriorOptions {
+            precision: Some(precision),
+            ..Default::default()
+        },
+        &device,
+    )
+    .unwrap();
     let (h, w) = (32, 32);
     let ad = device.clone().autodiff();
     let gt = tensor(rand01(7, 3 * h * w), [1, 3, h, w], &device);

@@ -66,6 +66,8 @@ pub struct PriorModels {
     pub unet_config: UNet2DConditionConfig,
     /// VAE image-to-latent factor.
     pub vae_factor: usize,
+    /// VAE config (the sampler's view needs it).
+    pub vae_config: AutoencoderKLConfig,
     /// Scheduler config of the prior.
     pub scheduler: SchedulerConfig,
     /// `alphas_cumprod[t]` of the training schedule.
@@ -152,6 +154,7 @@ impl PriorModels {
             vae: vae.no_grad(),
             unet_config,
             vae_factor: vae_config.scale_factor(),
+            vae_config,
             alphas_cumprod: alphas_cumprod(&scheduler),
             scheduler,
             source: root.to_path_buf(),
@@ -193,6 +196,7 @@ impl PriorModels {
             vae: vae.no_grad(),
             unet_config,
             vae_factor: vae_config.scale_factor(),
+            vae_config: vae_config.clone(),
             alphas_cumprod: alphas_cumprod(&scheduler),
             scheduler,
             source: recipe.to_path_buf(),

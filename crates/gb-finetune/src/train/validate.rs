@@ -17,7 +17,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use gb_diffusion::inpaint::{inpaint, InpaintPrior, InpaintRequest};
+use gb_diffusion::inpaint::{inpaint, InpaintRequest};
+use gb_diffusion::pipeline::SdComponents;
 
 use super::models::{PriorModels, Trainable};
 use crate::captions::{prompts_for, CaptionMode, Modality};
@@ -168,22 +169,23 @@ pub fn fill_nearest(img: &[f32], hole: &[f32], w: usize, h: usize) -> Vec<f32> {
     out
 }
 
-/// An [`InpaintPrior`] view of `models` with `trainable` (adapters included) on the plain
-/// `device`, for sampling.
+/// The sampler's [`SdComponents`] of `models` with `trainable` (adapters included) on the
+/// plain `device`.
 pub fn sampling_prior(
     models: &PriorModels,
     trainable: &Trainable,
     device: &Device,
-) -> InpaintPrior {
+) -> SdComponents {
     let t = trainable.valid();
-    InpaintPrior {
+    SdComponents {
+        root: models.source.clone(),
         tokenizer: models.tokenizer.clone(),
         text_encoder: t.text_encoder,
         unet: t.unet,
         unet_config: models.unet_config.clone(),
         vae: models.vae.valid(),
-        vae_scale_factor: models.vae_factor,
-        scheduler_config: models.scheduler.clone(),
+        vae_config: models.vae_config.clone(),
+        scheduler: models.scheduler.clone(),
         device: device.clone(),
     }
 }
@@ -235,7 +237,7 @@ impl Acc {
 /// Validates `prior` (a sampling view, see [`sampling_prior`]) on the first
 /// `settings.samples` items of `source`, with the fill baselines on the same holes.
 pub fn validate(
-    prior: &InpaintPrior,
+    prior: &SdComponents,
     source: &dyn PairSource,
     settings: &ValidationSettings,
 ) -> Result<ValidationReport, FinetuneError> {

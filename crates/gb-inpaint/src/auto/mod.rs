@@ -60,7 +60,7 @@ pub use pseudo_hole::{PlacedHole, PseudoHole};
 
 use crate::error::InpaintError;
 use crate::method::{MethodConfig, Prompts};
-use crate::prior::GuidancePrior;
+use crate::prior::SdPrior;
 use crate::trainer::{FitOptions, GuidedTrainer};
 pub use score::MIN_SCORE_SIDE;
 use score::{best_trial, rank, score, score_targets, ScoreTarget, TrialScores, METRICS};
@@ -196,7 +196,7 @@ fn auto_err(reason: String) -> InpaintError {
 }
 
 /// The cache key of a choice (module docs).
-fn cache_key(i: &AutoInputs, prior: Option<&GuidancePrior>) -> Result<CacheKey, InpaintError> {
+fn cache_key(i: &AutoInputs, prior: Option<&SdPrior>) -> Result<CacheKey, InpaintError> {
     let mut h = gb_core::fingerprint::Fnv64::default();
     for v in i.scene.split(Split::Train) {
         h.bytes(v.name.as_bytes());
@@ -255,7 +255,7 @@ fn grid(method: &MethodConfig) -> Vec<(f64, f64)> {
 /// cache. `prior` is lent to the trials and handed back.
 pub fn choose_weights(
     i: &AutoInputs,
-    prior: &mut Option<GuidancePrior>,
+    prior: &mut Option<SdPrior>,
 ) -> Result<AutoReport, InpaintError> {
     let key = cache_key(i, prior.as_ref())?;
     let dir = i.out.join(FOLDER);
@@ -407,7 +407,7 @@ struct TrialSetup<'a> {
 fn run_trials(
     i: &AutoInputs,
     setup: &TrialSetup,
-    prior: &mut Option<GuidancePrior>,
+    prior: &mut Option<SdPrior>,
 ) -> Result<Vec<Trial>, InpaintError> {
     let mut trials = Vec::new();
     for (lambda_rgb, lambda_normal) in grid(i.method) {
@@ -466,7 +466,7 @@ fn trial(
     i: &AutoInputs,
     setup: &TrialSetup,
     weights: (f64, f64),
-    prior: &mut Option<GuidancePrior>,
+    prior: &mut Option<SdPrior>,
 ) -> Result<TrialScores, InpaintError> {
     let mut method = i.method.clone();
     method.lambda_rgb = Weight::Fixed(weights.0);

@@ -36,7 +36,7 @@ pub use test_views::{disparity_map, render_test_views, TestViews};
 use crate::error::InpaintError;
 use crate::method::{PromptOverrides, SceneCaptions};
 use crate::personalize::{PersonalizeInputs, PersonalizeReport};
-use crate::prior::{lora_for, GuidancePrior};
+use crate::prior::{lora_for, SdPrior};
 use crate::report::RunPage;
 use crate::trainer::{FitOptions, GuidedTrainer};
 
@@ -178,11 +178,11 @@ impl Default for RunSpec {
 
 /// The prior and LoRA of `method`, resolved and loaded; `None` for a method without
 /// guidance (a LoRA given to one is an error).
-fn load_prior(
+fn method_prior(
     spec: &RunSpec,
     method: &crate::MethodConfig,
     prior_spec: Option<&str>,
-) -> Result<Option<GuidancePrior>, InpaintError> {
+) -> Result<Option<SdPrior>, InpaintError> {
     if !method.needs_prior() {
         if let Some(p) = spec.prior.as_deref().filter(|p| *p != "none") {
             tracing::info!(prior = p, method = %method.name, "method has no guidance: prior not used");
@@ -207,12 +207,12 @@ fn load_prior(
     let device = spec.device.device();
     let precision = prior_precision(spec, &device)?;
     tracing::info!(%precision, "prior precision");
-    Ok(Some(GuidancePrior::load(
-        &dir,
-        lora.as_deref(),
-        precision,
-        &device,
-    )?))
+    let opts = crate::prior::PriorOptions {
+        lora,
+        personal: None,
+        precision: Some(precision),
+    };
+    Ok(Some(crate::prior::load_prior(&dir, &opts, &device)?))
 }
 
 /// The precision of the run's prior: `--precision` when the device has it, else the device's
@@ -234,7 +234,7 @@ fn personalize_prior(
     config: &gb_nerf::train::NerfConfig,
     prompts: &crate::Prompts,
     references: &[crate::reference::ReferenceView],
-    prior: &mut Option<GuidancePrior>,
+    prior: &mut Option<SdPrior>,
 ) -> Result<Option<PersonalizeReport>, InpaintError> {
     if !method.personalize.enabled() {
         return Ok(None);
@@ -257,11 +257,14 @@ fn personalize_prior(
         backend: spec.device,
         out: &spec.out,
     })?;
-    *prior = Some(GuidancePrior::load_personalized(
+    let opts = crate::prior::PriorOptions {
+        lora: info.lora.clone(),
+        personal: Some(spec.out.join(&report.lora)),
+        precision: Some(info.precision),
+    };
+    *prior = Some(crate::prior::load_prior(
         &info.folder,
-        info.lora.as_deref(),
-        Some(&spec.out.join(&report.lora)),
-        info.precision,
+        &opts,
         &spec.device.device(),
     )?);
     Ok(Some(report))
@@ -296,7 +299,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     if let Some(depth) = spec.depth {
         config.train.depth = depth;
     }
-    let mut prior = load_prior(spec, &method, prior_spec.as_deref())?;
+    let mut prior = method_prior(spec, &method, prior_spec.as_deref())?;
 
     let (scene_dir, mut scene) = setup::load_or_generate(spec)?;
     setup::require_masks(&scene)?;

@@ -12,7 +12,7 @@ impl GuidedTrainer {
         scene: &Scene,
         path: &Path,
         method: MethodConfig,
-        guidance: Option<(GuidancePrior, Prompts)>,
+        guidance: Option<(SdPrior, Prompts)>,
         backend: BackendKind,
         steps: Option<usize>,
     ) -> Result<Self, InpaintError> {
@@ -48,7 +48,7 @@ impl GuidedTrainer {
         path: &Path,
         parts: CheckpointParts,
         method: MethodConfig,
-        guidance: Option<(GuidancePrior, Prompts)>,
+        guidance: Option<(SdPrior, Prompts)>,
         backend: BackendKind,
         config: NerfConfig,
     ) -> Result<Self, InpaintError> {
@@ -63,7 +63,7 @@ impl GuidedTrainer {
         mut parts: CheckpointParts,
         config: NerfConfig,
         method: MethodConfig,
-        guidance: Option<(GuidancePrior, Prompts)>,
+        guidance: Option<(SdPrior, Prompts)>,
         backend: BackendKind,
         strict: bool,
     ) -> Result<Self, InpaintError> {

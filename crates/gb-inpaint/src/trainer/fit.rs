@@ -2,6 +2,7 @@
 //! and the loop of a whole run with its checkpoints and non-finite-loss policy.
 
 use super::*;
+use gb_diffusion::distill::LatentEncoder;
 
 impl GuidedTrainer {
     /// One guidance term of `modality` on a prior input `image` of training view `view`, at
@@ -49,7 +50,7 @@ impl GuidedTrainer {
             }
         };
         let mut distiller = distiller_for(settings, &g.prior, seed, iteration)?;
-        let encoder = g.prior.encoder.as_ref();
+        let encoder = &g.prior.encoder;
         let (mask_latent, masked_latents) = match (unobserved_mask, modality) {
             // visibility-aware conditioning: the prior is told that only the unobserved
             // pixels are unknown, and sees the current render (detached) on the others

@@ -66,7 +66,7 @@ use crate::crop::{
 use crate::error::InpaintError;
 use crate::guidance::{distiller_for, guidance_term, Modality, TermConditioning, TermOutput};
 use crate::method::{MethodConfig, Prompts};
-use crate::prior::GuidancePrior;
+use crate::prior::SdPrior;
 use crate::reference::{CarriedSet, ReferenceState, ReferenceView};
 use crate::resume::{self, GuidedState, RunTotals, SavedMap};
 use crate::visibility::{gate_gradient, ObservedMap};
@@ -81,7 +81,7 @@ mod views;
 /// per-view crop constants (computed on first use).
 pub struct GuidanceState {
     /// The loaded prior.
-    pub prior: GuidancePrior,
+    pub prior: SdPrior,
     /// The prompts of the run.
     pub prompts: Prompts,
     rgb: Option<(DistillSettings, PromptEmbeddings)>,
@@ -308,7 +308,7 @@ impl GuidanceState {
     /// errors when no training view has a mask.
     pub fn new(
         method: &MethodConfig,
-        prior: GuidancePrior,
+        prior: SdPrior,
         prompts: Prompts,
         data: &TrainData,
         scene: &str,
@@ -331,12 +331,7 @@ impl GuidanceState {
             settings
                 .map(|s| -> Result<_, InpaintError> {
                     let guidance = s.guidance.build()?;
-                    let e = cache.for_guidance(
-                        prior.text.as_ref(),
-                        guidance.as_ref(),
-                        prompt,
-                        negative,
-                    )?;
+                    let e = cache.for_guidance(&prior.text, guidance.as_ref(), prompt, negative)?;
                     Ok((s, e))
                 })
                 .transpose()

@@ -9,7 +9,7 @@ impl GuidedTrainer {
         scene: &Scene,
         config: NerfConfig,
         method: MethodConfig,
-        guidance: Option<(GuidancePrior, Prompts)>,
+        guidance: Option<(SdPrior, Prompts)>,
         backend: BackendKind,
     ) -> Result<Self, InpaintError> {
         Self::from_base(
@@ -27,7 +27,7 @@ impl GuidedTrainer {
         scene: &Scene,
         config: NerfConfig,
         method: MethodConfig,
-        guidance: Option<(GuidancePrior, Prompts)>,
+        guidance: Option<(SdPrior, Prompts)>,
         backend: BackendKind,
         withheld: &[Option<gb_nerf::scene::Mask>],
     ) -> Result<Self, InpaintError> {
@@ -56,7 +56,7 @@ impl GuidedTrainer {
     }
 
     /// The prior, handed back when the trainer is done with it.
-    pub fn into_prior(self) -> Option<GuidancePrior> {
+    pub fn into_prior(self) -> Option<SdPrior> {
         self.guidance.map(|g| g.prior)
     }
 
@@ -65,7 +65,7 @@ impl GuidedTrainer {
         nerf: Trainer,
         scene: &Scene,
         method: MethodConfig,
-        guidance: Option<(GuidancePrior, Prompts)>,
+        guidance: Option<(SdPrior, Prompts)>,
     ) -> Result<Self, InpaintError> {
         if method.lambda_rgb.is_auto() || method.lambda_normal.is_auto() {
             return Err(InpaintError::MethodConfig {

@@ -19,7 +19,7 @@ impl GuidedTrainer {
                 &self.nerf.data.views[view],
                 margin,
                 g.prior.resolution,
-                g.prior.encoder.as_ref(),
+                &g.prior.encoder,
                 &g.device,
             )?;
             g.cache.insert(view, v);

@@ -4,15 +4,14 @@
 //! **Location.** `$GB_TEST_DATA` (taken from the workspace root when relative), else
 //! `../shared` beside the checkout; it counts as present when it holds `data/`.
 //!
-//! **Skipping.** Each crate whose tests read the data has a `build.rs` that compiles this
-//! very file (`#[path]` module: std only, no crate paths) and calls
-//! [`emit_build_script_cfg`]. Without the data that sets `cfg(gb_no_shared_data)`, and the
-//! tests carry
+//! **Skipping.** Each crate whose tests read the data has this crate as a build-dependency
+//! (std only) and a `build.rs` that calls [`emit_build_script_cfg`]. Without the data that
+//! sets `cfg(gb_no_shared_data)`, and the tests carry
 //! `#[cfg_attr(gb_no_shared_data, ignore = "needs the shared test data (../shared or GB_TEST_DATA): ...")]`,
 //! so libtest lists them as `ignored, needs the shared test data ...` and counts them in
 //! each summary's `N ignored`. [`test_data_dir`] still panics when the data is missing, so
 //! a test that needs it and is not marked fails rather than passing silently, and
-//! [`crate::shared_data_guard!`] fails when the data appeared after such a build.
+//! [`shared_data_guard!`] fails when the data appeared after such a build.
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -66,7 +65,7 @@ pub fn test_data_dir() -> PathBuf {
          checkout as ../shared or set GB_TEST_DATA to the folder holding data/ and weights/; \
          a test that needs it must carry \
          #[cfg_attr(gb_no_shared_data, ignore = \"{IGNORE_REASON_PREFIX} ...\")] and its \
-         crate the build.rs that sets that cfg (crates/gb-core/src/testdata.rs)",
+         crate the build.rs that sets that cfg (crates/gb-testdata)",
         dir.display()
     );
     dir
@@ -77,7 +76,7 @@ pub fn test_data_dir() -> PathBuf {
 /// changes or, with the data present, when its `data/` folder changes. A missing folder is
 /// not watched: Cargo reruns a build script that watches a missing path on every build, and
 /// the crate and everything above it would recompile each time. Data added later is picked
-/// up when `GB_TEST_DATA` changes (or `touch build.rs`); [`crate::shared_data_guard!`] says so.
+/// up when `GB_TEST_DATA` changes (or `touch build.rs`); [`shared_data_guard!`] says so.
 pub fn emit_build_script_cfg() {
     let (dir, present) = locate_test_data();
     println!("cargo::rustc-check-cfg=cfg({MISSING_CFG})");
@@ -115,7 +114,7 @@ macro_rules! shared_data_guard {
         #[cfg(gb_no_shared_data)]
         #[test]
         fn shared_test_data_is_still_missing() {
-            $crate::testdata::assert_still_missing(env!("CARGO_MANIFEST_DIR"));
+            $crate::assert_still_missing(env!("CARGO_MANIFEST_DIR"));
         }
     };
 }
