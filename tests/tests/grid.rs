@@ -1,4 +1,4 @@
-//! The method grid as independent cells (`gb_inpaint::grid`): a 2-cell grid is planned and
+//! The method grid as independent cells (`gb_grid`): a 2-cell grid is planned and
 //! its Slurm and Kubernetes job files emitted, each cell is run by its index (one through
 //! the CLI, one through the library), and the merged tables equal the single-process
 //! `cargo xtask ablate` of the same grid, timings aside. The Kubernetes manifest parses
@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use gb_inpaint::grid::emit::{kubernetes_job, EmitOptions};
+use gb_grid::emit::{kubernetes_job, EmitOptions};
 use gb_tests::{
     assert_success, path_str as s, small_grid_flags, small_preset, small_stairs, xtask,
 };
@@ -44,7 +44,7 @@ fn a_two_cell_grid_runs_by_index_and_merges_like_the_single_process_ablate() {
     emit.extend(&common);
     emit.extend(["--emit", "slurm,kubernetes", "--out", s(&grid)]);
     assert_success(&xtask(&emit), "ablate --emit");
-    let planned = gb_inpaint::grid::Grid::read(&grid).unwrap();
+    let planned = gb_grid::Grid::read(&grid).unwrap();
     let dirs: Vec<&str> = planned.cells.iter().map(|c| c.dir.as_str()).collect();
     assert_eq!(dirs, ["none", "mvip-nerf"]);
     assert!(planned.sweep.is_empty(), "no csd, no --w3: no sweep");
@@ -62,19 +62,17 @@ fn a_two_cell_grid_runs_by_index_and_merges_like_the_single_process_ablate() {
     let err = String::from_utf8_lossy(&partial.stderr);
     assert_eq!(partial.status.code(), Some(2), "{err}");
     assert!(err.contains("1 cell(s) have not finished: [1]"), "{err}");
-    let report = gb_inpaint::grid::merge(&grid).unwrap();
+    let report = gb_grid::merge(&grid).unwrap();
     assert_eq!(report.missing, [1]);
 
     // cell 1 by the library; a bad index is an error naming it
     let outcome = {
         // trains in-process from the seeded device RNG (crate::DEVICE_RNG)
         let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
-        gb_inpaint::grid::run_cell(&grid, 1).unwrap()
+        gb_grid::run_cell(&grid, 1).unwrap()
     };
     assert_eq!(outcome.result.as_ref().map(|r| r.steps), Ok(2));
-    let bad = gb_inpaint::grid::run_cell(&grid, 2)
-        .unwrap_err()
-        .to_string();
+    let bad = gb_grid::run_cell(&grid, 2).unwrap_err().to_string();
     assert!(
         bad.starts_with("--cell 2: ") && bad.contains("2 cell(s)"),
         "{bad}"

@@ -107,6 +107,6 @@ fn the_slurm_array_job_runs_every_cell() {
 }
 
 fn planned_cells(grid: &Path) -> serde_json::Value {
-    let g = gb_inpaint::grid::Grid::read(grid).unwrap();
+    let g = gb_grid::Grid::read(grid).unwrap();
     serde_json::to_value(&g.cells).unwrap()
 }

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use gb_core::BackendKind;
-use gb_inpaint::grid::GridSettings;
+use gb_grid::GridSettings;
 use gb_nerf::train::DepthSupervision;
 
 /// The settings of the method grid, shared by `cargo xtask ablate` and `bench quality`.

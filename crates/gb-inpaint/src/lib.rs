@@ -28,15 +28,14 @@
 //!   sees the surface);
 //! - [`run`]: one object-removal run as a library call ([`run::run`] on a [`RunSpec`],
 //!   returning a [`RunSummary`], its `metrics.json`);
-//! - [`grid`]: the method grid as independent cells (planned, run by index, merged; Slurm
-//!   and Kubernetes job files);
-//! - [`ablate`]: the grid's tables (baselines, ablation, w3 sweep);
 //! - [`export`]: the run's inpainted scene as a nerfstudio dataset (`OUT/export/`).
+//!
+//! The method grid (many runs, their tables, cluster files) is the gb-grid crate above this
+//! one.
 //!
 //! The command line is `cargo xtask inpaint` (xtask/src/cmd/inpaint.rs), a thin call of
 //! [`run::run`].
 
-pub mod ablate;
 pub mod auto;
 pub mod crop;
 pub mod error;
@@ -44,7 +43,6 @@ pub mod export;
 pub mod fill;
 pub mod geometry;
 pub mod gif;
-pub mod grid;
 pub mod guidance;
 pub mod method;
 pub mod oracle;

@@ -1,5 +1,5 @@
 //! `cargo xtask ablate`: the paper's method grid on one scene, and its tables
-//! (`gb_inpaint::grid`).
+//! (`gb_grid`).
 //!
 //! ```text
 //! cargo xtask ablate --scene DIR [--methods LIST] [--preset P] [--prior P] [--lora FILE]
@@ -32,8 +32,8 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
-use gb_inpaint::grid::emit::{write_jobs, EmitOptions, Engine};
-use gb_inpaint::grid::{self, Grid, GridSettings, MergeReport};
+use gb_grid::emit::{write_jobs, EmitOptions, Engine};
+use gb_grid::{self as grid, Grid, GridSettings, MergeReport};
 
 /// Arguments of `cargo xtask ablate`.
 #[derive(clap::Args, Debug)]

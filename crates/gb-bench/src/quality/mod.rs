@@ -2,7 +2,7 @@
 //! scenes with ground truth, written to `bench/results/quality-<scene>-<timestamp>.json`.
 //!
 //! For each scene of `--scenes` (default `stairs,fence,alcove`, generated with seed 0) it runs
-//! the method grid of `cargo xtask ablate` (`gb_inpaint::grid`, in this process) on `--methods` (default: the baselines
+//! the method grid of `cargo xtask ablate` (`gb_grid`, in this process) on `--methods` (default: the baselines
 //! table, none first, plus the ablation rows) without the w3 sweep, into `--work/<scene>/`,
 //! and records the baseline and ablation tables with the machine. The reference is the
 //! `none` run of the same job: `vs_none` gives, for each method and each column, whether it
@@ -47,7 +47,7 @@ mod tables;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use gb_inpaint::grid::{self, Grid};
+use gb_grid::{self as grid, Grid};
 use gb_nerf::scene::procedural::{self, ProceduralOptions, SceneName};
 use serde_json::{json, Value};
 

@@ -1,6 +1,6 @@
 //! One object-removal run, the project's main operation, as a library call:
 //! [`run`]`(&`[`RunSpec`]`) -> `[`RunSummary`]. `cargo xtask inpaint` parses its flags into a
-//! [`RunSpec`]; the method grid ([`crate::grid`]), the benchmarks and the end-to-end tests
+//! [`RunSpec`]; the method grid (the gb-grid crate), the benchmarks and the end-to-end tests
 //! call [`run`] directly.
 //!
 //! A run resolves and checks everything a user can get wrong before it trains (method and

@@ -7,6 +7,7 @@
 //! `$SLURM_ARRAY_TASK_ID` / `$JOB_COMPLETION_INDEX`. The single-process `cargo xtask ablate`
 //! is the same grid run in a loop. There is no scheduler of our own.
 
+pub mod ablate;
 pub mod emit;
 mod merge;
 mod plan;
@@ -20,8 +21,8 @@ pub use merge::{merge, MergeReport};
 pub use plan::grid_methods;
 
 use crate::ablate::RunOutcome;
-use crate::error::InpaintError;
-use crate::run::{run, RunSpec, RunSummary};
+use gb_inpaint::run::{run, RunSpec, RunSummary};
+use gb_inpaint::InpaintError;
 
 /// The grid's file in its folder.
 pub const GRID_FILE: &str = "grid.toml";
@@ -58,18 +59,18 @@ pub struct GridSettings {
     /// Whether each run writes the nerfstudio export (absent in grids from before the
     /// setting, when runs exported by default: full).
     #[serde(default = "full_export", skip_serializing_if = "is_full_export")]
-    pub export: crate::export::ExportMode,
-    /// Whether each run writes `probe/` ([`crate::run::probe`]; absent: no).
+    pub export: gb_inpaint::export::ExportMode,
+    /// Whether each run writes `probe/` ([`gb_inpaint::run::probe`]; absent: no).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub probe: bool,
 }
 
-fn full_export() -> crate::export::ExportMode {
-    crate::export::ExportMode::Full
+fn full_export() -> gb_inpaint::export::ExportMode {
+    gb_inpaint::export::ExportMode::Full
 }
 
-fn is_full_export(m: &crate::export::ExportMode) -> bool {
-    *m == crate::export::ExportMode::Full
+fn is_full_export(m: &gb_inpaint::export::ExportMode) -> bool {
+    *m == gb_inpaint::export::ExportMode::Full
 }
 
 /// One run of the grid.

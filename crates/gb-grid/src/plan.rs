@@ -7,9 +7,9 @@ use gb_diffusion::distill::{DistillSettings, GuidanceMethod};
 
 use super::{Grid, GridCell, GridSettings, SweepPoint};
 use crate::ablate::{ABLATION_ROWS, BASELINE_ROWS, DEFAULT_W3};
-use crate::error::InpaintError;
-use crate::method::MethodConfig;
-use crate::prior::lora_for;
+use gb_inpaint::prior::lora_for;
+use gb_inpaint::InpaintError;
+use gb_inpaint::MethodConfig;
 
 /// The grid's methods in run order (none first: it is every report's baseline): the
 /// tables' methods, restricted to `selected` when given, then any other selected method.

@@ -10,7 +10,7 @@ use serde_json::json;
 
 use super::{read_outcome, Grid};
 use crate::ablate::{self, RunOutcome, ABLATION_ROWS, BASELINE_ROWS};
-use crate::error::InpaintError;
+use gb_inpaint::InpaintError;
 
 /// What [`merge`] found and wrote.
 #[derive(Debug, Clone)]

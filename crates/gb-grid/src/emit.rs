@@ -15,8 +15,8 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::error::InpaintError;
-use crate::run::shell_quote;
+use gb_inpaint::run::shell_quote;
+use gb_inpaint::InpaintError;
 
 /// The engines a grid can be emitted for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -1,4 +1,4 @@
-//! The tables of a method grid ([`crate::grid`] runs it; this module turns the runs'
+//! The tables of a method grid ([`crate`] runs it; this module turns the runs'
 //! [`RunSummary`]s into the paper's two tables and the w3 sweep):
 //!
 //! - **baselines**: rows [`BASELINE_ROWS`] (no prior, SPIn-NeRF-style SDS, MVIP-NeRF, CSD,
@@ -16,7 +16,7 @@
 
 use serde_json::{json, Value};
 
-use crate::run::RunSummary;
+use gb_inpaint::run::RunSummary;
 use gb_report::svg::{LineChart, Series};
 
 /// Baseline comparison: (row label, method).
