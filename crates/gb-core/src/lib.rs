@@ -2,7 +2,8 @@
 //! ([`backend`]), crash-safe file writes ([`atomic`]), PNG/JPEG image IO ([`image_io`]),
 //! `.npy` reading and writing ([`npy`]), the sectioned checkpoint container ([`sections`]), progress bars that do not fight the log ([`progress`]), one-line error messages
 //! ([`messages`]), the prior's float precision ([`precision`]), row lookups with a parallel
-//! backward ([`indexing`]), content fingerprints for caches ([`fingerprint`]) and, with the `clap` feature, the command lines' value parsers
+//! backward ([`indexing`]), content fingerprints for caches ([`fingerprint`]), the one PSNR
+//! formula ([`psnr`]) and, with the `clap` feature, the command lines' value parsers
 //! (`cli`).
 
 pub mod assets;
@@ -18,6 +19,7 @@ pub mod npy;
 pub mod npy_guard;
 pub mod precision;
 pub mod progress;
+pub mod psnr;
 pub mod resample;
 pub mod sections;
 pub mod tensor_values;
@@ -34,5 +36,6 @@ pub use image_io::{
 pub use indexing::gather_rows;
 pub use npy_guard::check_npy_header;
 pub use precision::{Precision, PrecisionError};
+pub use psnr::psnr_from_mse;
 pub use tensor_values::{device_reads, f32_values, read_f32, TensorValuesError};
 pub use testdata::test_data_dir;

@@ -21,6 +21,7 @@
 //!   it over the mask's pixels and the channels, with NO border cropping, since masks may touch
 //!   the border. An empty mask is [`MetricError::EmptyMask`].
 
+pub use gb_core::psnr_from_mse;
 use gb_core::RgbImage;
 
 use crate::error::MetricError;
@@ -121,15 +122,6 @@ pub fn mse(pred: &RgbImage, gt: &RgbImage, region: &Region) -> Result<f64, Metri
         }
     };
     Ok(sum / (count * 3) as f64)
-}
-
-/// `10 log10(1 / mse)`; infinite for a zero error.
-pub fn psnr_from_mse(mse: f64) -> f64 {
-    if mse == 0.0 {
-        f64::INFINITY
-    } else {
-        10.0 * (1.0 / mse).log10()
-    }
 }
 
 /// Mean SSIM of `pred` against `gt` on RGB over `region` (see the module documentation).

@@ -7,7 +7,7 @@
 //! - the choice picks guidance when the guidance is the oracle's exact score of the true
 //!   images, and 0 when the same pull points at noise.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use gb_core::{BackendKind, RgbImage};
 use gb_diffusion::distill::{Branch, GuidanceMethod, PriorInputMode};
@@ -21,10 +21,6 @@ use gb_nerf::train::{DepthSupervision, NerfConfig};
 use crate::DEVICE_RNG as LOCK;
 
 const KIND: BackendKind = BackendKind::Flex;
-
-fn prior_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../gb-diffusion/tests/fixtures/sd_image/pipeline")
-}
 
 fn scene(dir: &Path) -> Scene {
     scene_of(dir, SceneName::Stairs, 3)
@@ -188,17 +184,7 @@ fn choose(s: &Scene, dir: &Path, clean: &Path, out: &Path) -> gb_inpaint::auto::
     let config = config();
     let images = gb_inpaint::oracle::load_object_free(s, clean, 1, "[oracle] clean").unwrap();
     let prompts = method.resolve_prompts(&SceneCaptions::read(dir), &PromptOverrides::default());
-    let mut prior = Some(
-        gb_inpaint::prior::load_prior(
-            &prior_dir(),
-            &gb_inpaint::prior::PriorOptions {
-                precision: Some(gb_core::Precision::F32),
-                ..Default::default()
-            },
-            &KIND.device(),
-        )
-        .unwrap(),
-    );
+    let mut prior = Some(crate::fixture_prior());
     let inputs = AutoInputs {
         scene: s,
         method: &method,

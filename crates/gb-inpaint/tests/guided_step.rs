@@ -10,7 +10,7 @@
 //! - a skipped (NaN) step leaves the field unchanged, and the run stops after the configured
 //!   streak naming the last good checkpoint.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use burn::tensor::{Tensor, TensorData};
 use gb_core::BackendKind;
@@ -26,10 +26,6 @@ use gb_nerf::train::{NerfConfig, Trainer};
 use crate::DEVICE_RNG as LOCK;
 
 const KIND: BackendKind = BackendKind::Flex;
-
-fn prior_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../gb-diffusion/tests/fixtures/sd_image/pipeline")
-}
 
 fn scene(dir: &Path) -> Scene {
     let opts = ProceduralOptions {
@@ -64,15 +60,7 @@ fn guided(
     let mut m = MethodConfig::builtin(method).unwrap();
     edit(&mut m);
     let guidance = m.needs_prior().then(|| {
-        let prior = gb_inpaint::prior::load_prior(
-            &prior_dir(),
-            &gb_inpaint::prior::PriorOptions {
-                precision: Some(gb_core::Precision::F32),
-                ..Default::default()
-            },
-            &KIND.device(),
-        )
-        .unwrap();
+        let prior = crate::fixture_prior();
         let prompts = m.resolve_prompts(&SceneCaptions::read(dir), &PromptOverrides::default());
         (prior, prompts)
     });

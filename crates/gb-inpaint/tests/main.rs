@@ -15,3 +15,14 @@ mod visibility;
 /// seeded initialisation holds this lock, whichever module it is in, so that no two
 /// interleave their draws (they were apart when each file was its own binary).
 pub static DEVICE_RNG: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// gb-diffusion's tiny fixture pipeline as the run's prior: f32, on flex.
+pub fn fixture_prior() -> gb_inpaint::SdPrior {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../gb-diffusion/tests/fixtures/sd_image/pipeline");
+    let opts = gb_inpaint::PriorOptions {
+        precision: Some(gb_core::Precision::F32),
+        ..Default::default()
+    };
+    gb_inpaint::load_prior(&dir, &opts, &gb_core::BackendKind::Flex.device()).unwrap()
+}

@@ -10,7 +10,7 @@
 //! (That the gate scales the gradient per pixel and keeps the value is a unit test of
 //! `gb_inpaint::visibility`.)
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::MutexGuard;
 
 use burn::tensor::{Tensor, TensorData};
@@ -29,10 +29,6 @@ use gb_nerf::train::{DepthSupervision, NerfConfig};
 use crate::DEVICE_RNG as LOCK;
 
 const KIND: BackendKind = BackendKind::Flex;
-
-fn prior_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../gb-diffusion/tests/fixtures/sd_image/pipeline")
-}
 
 fn options() -> ProceduralOptions {
     ProceduralOptions {
@@ -62,15 +58,7 @@ fn trainer(scene: &Scene, dir: &Path, steps: usize, observed_weight: f64) -> Gui
         resolution: 32,
         ..VisibilityConfig::default()
     };
-    let prior = gb_inpaint::prior::load_prior(
-        &prior_dir(),
-        &gb_inpaint::prior::PriorOptions {
-            precision: Some(gb_core::Precision::F32),
-            ..Default::default()
-        },
-        &KIND.device(),
-    )
-    .unwrap();
+    let prior = crate::fixture_prior();
     let prompts = m.resolve_prompts(&SceneCaptions::read(dir), &PromptOverrides::default());
     let mut c = NerfConfig::preset("fast").unwrap();
     c.train.steps = steps;

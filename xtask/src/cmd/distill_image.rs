@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use burn::tensor::{Tensor, TensorData};
-use gb_core::{read_gray, read_rgb, write_rgb_png, BackendKind, RgbImage};
+use gb_core::{read_rgb, write_rgb_png, BackendKind, RgbImage};
 use gb_diffusion::distill::sd_adapter::SdPrior;
 use gb_diffusion::distill::{
     distill_view, DistillSettings, GuidanceMethod, PriorInputMode, PriorModels, PromptCache,
@@ -195,29 +195,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Reads a mask as 0/1 values; accepts 0/255 and 0/1 encodings.
+/// Reads `--mask` as 0/1 values with the scenes' reader ([`gb_nerf::scene::masks::read_mask`]:
+/// 0/1 or 0/255, binary), refusing a size other than the image's and an empty mask.
 fn read_mask(path: &Path, width: usize, height: usize) -> anyhow::Result<Vec<f32>> {
-    let (mw, mh, values) = read_gray(path).with_context(|| "reading --mask".to_string())?;
-    if (mw, mh) != (width, height) {
+    let mut fitted = Vec::new();
+    let mask = gb_nerf::scene::masks::read_mask(path, width, height, &mut fitted)
+        .with_context(|| "reading --mask".to_string())?;
+    if !fitted.is_empty() {
         bail!(
-            "{}: mask is {mw}x{mh} but the image is {width}x{height}",
+            "{}: the mask is not the image's size {width}x{height} (--mask must match --image)",
             path.display()
         );
     }
-    let max = values.iter().cloned().fold(0.0f32, f32::max);
-    let threshold = if max > 0.0 && max < 0.5 {
-        max * 0.5
-    } else {
-        0.5
-    };
-    let mask: Vec<f32> = values
-        .iter()
-        .map(|&v| if v >= threshold && v > 0.0 { 1.0 } else { 0.0 })
-        .collect();
-    if !mask.iter().any(|&v| v > 0.0) {
+    if !mask.data.iter().any(|&b| b) {
         bail!("{}: the mask is empty (no white pixel)", path.display());
     }
-    Ok(mask)
+    Ok(mask
+        .data
+        .iter()
+        .map(|&b| if b { 1.0 } else { 0.0 })
+        .collect())
 }
 
 fn to_tensor(img: &RgbImage, device: &burn::tensor::Device) -> Tensor<4> {

@@ -191,7 +191,7 @@ impl GuidedTrainer {
             step,
             loss: finite(loss_value),
             recon_loss: finite(recon_value),
-            psnr: psnr_from_mse(rgb_mse as f64),
+            psnr: psnr_from_mse((rgb_mse as f64).max(LOG_MIN_MSE)),
             lr: self.nerf.config.lr_at(step),
             skipped: false,
             evaluations_per_ray: recon.evaluations_per_ray,

@@ -45,6 +45,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::tensor::Tensor;
+use gb_core::psnr::{psnr_from_mse, LOG_MIN_MSE};
 use gb_core::BackendKind;
 use gb_diffusion::distill::prior_input::compose;
 use gb_diffusion::distill::{
@@ -52,7 +53,6 @@ use gb_diffusion::distill::{
 };
 use gb_nerf::scene::Scene;
 use gb_nerf::train::data::TrainData;
-use gb_nerf::train::losses::psnr_from_mse;
 use gb_nerf::train::{NerfConfig, NerfError, Trainer};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::{Rng, SeedableRng};

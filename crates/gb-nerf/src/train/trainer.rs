@@ -16,7 +16,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::checkpoint::{self, CheckpointMeta, CheckpointParts, RngState};
 use super::data::TrainData;
-use super::losses::{disparity_loss, distortion_of, mse, psnr_from_mse};
+use super::losses::{disparity_loss, distortion_of, mse};
 use super::{DepthSupervision, NerfConfig, NerfError};
 use crate::field::NerfField;
 use crate::render::image::{render_image, ImageRender, ImageSettings};
@@ -24,6 +24,7 @@ use crate::render::rays::camera_rays;
 use crate::render::{render_profiles, render_rays, Background, RayProfile};
 use crate::sampler::{sample_rays, OccupancyGrid, RayBatch, SceneSpace};
 use crate::scene::{Camera, Mask, Scene};
+use gb_core::psnr::{psnr_from_mse, LOG_MIN_MSE};
 
 /// Loss and quality of one training step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -306,7 +307,7 @@ impl Trainer {
         self.apply_loss_valued(r.loss, loss_value)?;
         Ok(StepStats {
             loss: loss_value as f64,
-            psnr: psnr_from_mse(rgb_mse as f64),
+            psnr: psnr_from_mse((rgb_mse as f64).max(LOG_MIN_MSE)),
             evaluations_per_ray: r.evaluations_per_ray,
         })
     }
