@@ -19,5 +19,6 @@ pub mod sample;
 pub mod synthetic;
 pub mod tiny_prior;
 pub mod train;
+pub mod validate_only;
 
 pub use error::FinetuneError;

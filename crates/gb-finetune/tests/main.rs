@@ -12,6 +12,7 @@ mod data_synthetic;
 mod recipe_resume;
 mod tiny_prior_benefit;
 mod train_lora;
+mod validate_only;
 
 /// Burn's device RNG is process-global, and trainers seed it before they initialise their
 /// parameters. Every test of this binary that builds a trainer, seeds the RNG or depends on a

@@ -18,13 +18,12 @@ use gb_core::BackendKind;
 use gb_diffusion::pipeline::SdComponents;
 use gb_finetune::captions::CaptionMode;
 use gb_finetune::diode::{DiodeDataset, DiodeSplit};
-use gb_finetune::run::{run_finetune, validation_settings, RunOptions};
+use gb_finetune::run::{run_finetune, RunOptions};
 use gb_finetune::sample::PairSource;
 use gb_finetune::synthetic::SyntheticPairs;
 use gb_finetune::tiny_prior::{run_recipe, SyntheticData};
-use gb_finetune::train::vae_stage::reconstruction_psnr;
-use gb_finetune::train::validate::validate;
 use gb_finetune::train::{FinetuneConfig, PriorModels};
+use gb_finetune::validate_only::validate_prior;
 
 /// Arguments of `cargo xtask finetune`.
 #[derive(clap::Args, Debug)]
@@ -236,58 +235,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// `--validate-only`: the base with and without its LoRA, and the fill baselines, on the
-/// held-out pairs.
+/// held-out pairs ([`validate_prior`]), written to `OUT/validation.json`.
 fn validate_only(
     args: &Args,
     base_dir: &Path,
     val: &dyn PairSource,
     plain: &burn::tensor::Device,
 ) -> anyhow::Result<()> {
-    let load = || {
-        SdComponents::load_inpainting(base_dir, plain)
-            .with_context(|| format!("loading the prior {}", base_dir.display()))
-    };
-    let prior = load()?;
+    let prior = SdComponents::load_inpainting(base_dir, plain)
+        .with_context(|| format!("loading the prior {}", base_dir.display()))?;
     let native = prior.unet_config.native_resolution(prior.vae_factor());
     let mut cfg = config_of(args, native)?;
     if args.config.is_none() && args.validation_samples.is_none() {
         cfg.validation_samples = val.len();
     }
-    let lora = args.lora.clone().or_else(|| {
-        let own = base_dir.join(gb_diffusion::lora::LORA_FILE_NAME);
-        own.is_file().then_some(own)
-    });
-    let mut settings = validation_settings(&cfg);
-    settings.normals = true;
-    let started = std::time::Instant::now();
-    let autoencoder_psnr = reconstruction_psnr(&prior.vae, val, settings.resolution, plain)?;
-    tracing::info!(autoencoder_psnr, "autoencoder reconstruction");
-    let base_report = validate(&prior, val, &settings)?;
-    tracing::info!(?base_report, "validation of the base");
-    let lora_report = match &lora {
-        Some(path) => {
-            let (with, n) = load()?
-                .with_lora(path)
-                .with_context(|| format!("attaching {}", path.display()))?;
-            tracing::info!(adapted = n, "LoRA {}", path.display());
-            Some(validate(&with, val, &settings)?)
-        }
-        None => None,
-    };
-    let report = serde_json::json!({
-        "prior": base_dir.display().to_string(),
-        "lora": lora.as_ref().map(|p| p.display().to_string()),
-        "samples": settings.samples.min(val.len()),
-        "averaged_samples": settings.average,
-        "ddim_steps": settings.ddim_steps,
-        "blend_known": settings.blend_known,
-        "resolution": settings.resolution,
-        "mode": cfg.mode,
-        "seconds": started.elapsed().as_secs_f64(),
-        "autoencoder_psnr": autoencoder_psnr,
-        "base": base_report,
-        "with_lora": lora_report,
-    });
+    let report = validate_prior(&prior, base_dir, args.lora.as_deref(), val, &cfg, plain)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let path = args.out.join("validation.json");
