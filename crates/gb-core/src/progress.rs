@@ -8,7 +8,7 @@
 
 use std::sync::OnceLock;
 
-use indicatif::{MultiProgress, ProgressBar};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
 static MULTI: OnceLock<MultiProgress> = OnceLock::new();
 
@@ -25,4 +25,22 @@ pub fn bar(len: u64) -> ProgressBar {
         Some(multi) => multi.add(bar),
         None => bar,
     }
+}
+
+/// The bar of a training loop: `total` steps with elapsed and remaining time, at
+/// `position` (a resumed run's step), drawn when `show`, hidden otherwise.
+pub fn training_bar(total: u64, position: u64, show: bool) -> ProgressBar {
+    let bar = if show {
+        self::bar(total)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}] {msg}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_position(position);
+    bar
 }

@@ -38,6 +38,7 @@ fn component<E: std::error::Error + Send + Sync + 'static>(
 }
 
 /// Every network and config of a diffusers Stable Diffusion folder.
+#[derive(Clone)]
 pub struct SdComponents {
     /// Where the networks came from: the folder, a recipe folder, or a name (random weights).
     pub root: PathBuf,

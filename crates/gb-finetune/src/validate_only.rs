@@ -45,9 +45,8 @@ pub struct PriorValidation {
 }
 
 /// Validates `prior` (loaded from `base_dir` by [`SdComponents::load_inpainting`] on the plain
-/// `device`) on `val` with `cfg`'s validation settings (normals included), then the same
-/// folder with `lora` merged, or the folder's own LoRA file when `lora` is `None` and it has
-/// one.
+/// `device`) on `val` with `cfg`'s validation settings (normals included), then a copy of it
+/// with `lora` merged, or the folder's own LoRA file when `lora` is `None` and it has one.
 pub fn validate_prior(
     prior: &SdComponents,
     base_dir: &Path,
@@ -69,12 +68,9 @@ pub fn validate_prior(
     tracing::info!(?base, "validation of the base");
     let with_lora = match &lora {
         Some(path) => {
-            let context = |what: &str| format!("{what} {}", path.display());
-            let loaded = SdComponents::load_inpainting(base_dir, device)
-                .map_err(|e| FinetuneError::diffusion(context("loading the prior for"), e))?;
-            let (with, n) = loaded
-                .with_lora(path)
-                .map_err(|e| FinetuneError::diffusion(context("attaching"), e))?;
+            let (with, n) = prior.clone().with_lora(path).map_err(|e| {
+                FinetuneError::diffusion(format!("attaching {}", path.display()), e)
+            })?;
             tracing::info!(adapted = n, "LoRA {}", path.display());
             Some(validate(&with, val, &settings)?)
         }

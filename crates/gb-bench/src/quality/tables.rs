@@ -31,19 +31,16 @@ pub(super) fn vs_none(table: &Value) -> Value {
 /// For each row, on how many tables (one per seed) it beats that table's `none` row, per
 /// column: `{"label": {"key": {"wins": k, "of": n}}}`.
 pub(super) fn wins_vs_none(tables: &[Value]) -> Value {
-    let mut out = serde_json::Map::new();
+    let mut out: std::collections::BTreeMap<String, serde_json::Map<String, Value>> =
+        Default::default();
     for t in tables {
         let Value::Object(per_row) = vs_none(t) else {
             continue;
         };
         for (label, cols) in per_row {
-            let entry = out
-                .entry(label)
-                .or_insert_with(|| Value::Object(Default::default()));
+            let entry = out.entry(label).or_default();
             for (key, beats) in cols.as_object().into_iter().flatten() {
                 let cell = entry
-                    .as_object_mut()
-                    .expect("an object")
                     .entry(key.clone())
                     .or_insert_with(|| json!({"wins": 0, "of": 0}));
                 let wins = cell["wins"].as_u64().unwrap_or(0) + u64::from(beats == &json!(true));
@@ -52,7 +49,11 @@ pub(super) fn wins_vs_none(tables: &[Value]) -> Value {
             }
         }
     }
-    out.into()
+    Value::Object(
+        out.into_iter()
+            .map(|(label, cols)| (label, Value::Object(cols)))
+            .collect(),
+    )
 }
 
 /// The mean of ablate tables of the same grid over seeds: each row (matched by label, in the

@@ -237,18 +237,8 @@ impl GuidedTrainer {
         let total = self.nerf.config.train.steps;
         let start = Instant::now();
         let first = self.nerf.step;
-        let bar = if opts.progress {
-            gb_core::progress::bar(total as u64)
-        } else {
-            ProgressBar::hidden()
-        };
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}] {msg}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        bar.set_position(self.nerf.step as u64);
+        let bar =
+            gb_core::progress::training_bar(total as u64, self.nerf.step as u64, opts.progress);
         let mut log = match &opts.log {
             Some(path) => {
                 if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {

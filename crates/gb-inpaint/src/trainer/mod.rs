@@ -54,7 +54,6 @@ use gb_diffusion::distill::{
 use gb_nerf::scene::Scene;
 use gb_nerf::train::data::TrainData;
 use gb_nerf::train::{NerfConfig, NerfError, Trainer};
-use indicatif::{ProgressBar, ProgressStyle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;

@@ -10,7 +10,6 @@ use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::store::ModuleRecord;
 use burn::tensor::{Bytes, Tensor, TensorData};
 use gb_core::{read_f32, BackendKind};
-use indicatif::{ProgressBar, ProgressStyle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -336,18 +335,7 @@ impl Trainer {
         let total = self.config.train.steps;
         let start = Instant::now();
         let first = self.step;
-        let bar = if progress {
-            gb_core::progress::bar(total as u64)
-        } else {
-            ProgressBar::hidden()
-        };
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}] {msg}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        bar.set_position(self.step as u64);
+        let bar = gb_core::progress::training_bar(total as u64, self.step as u64, progress);
         let mut last = None;
         let mut evals = 0.0f64;
         while self.step < total {
