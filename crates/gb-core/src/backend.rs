@@ -93,6 +93,53 @@ impl FromStr for BackendKind {
     }
 }
 
+/// The devices of one run, built once from its `--device` choice and handed down: the plain
+/// device (the prior, rendering, the metrics) and the same device with autodiff (training).
+#[derive(Debug, Clone)]
+pub struct Devices {
+    /// The choice they were built from, as logs and configs name it.
+    pub kind: BackendKind,
+    /// The plain device.
+    pub plain: Device,
+    /// The autodiff device, for training.
+    pub train: Device,
+}
+
+impl Devices {
+    /// Builds both devices of `kind`.
+    pub fn new(kind: BackendKind) -> Self {
+        let plain = kind.device();
+        Self {
+            kind,
+            train: plain.clone().autodiff(),
+            plain,
+        }
+    }
+
+    /// The backend's lowercase name ([`BackendKind::name`]).
+    pub fn name(&self) -> &'static str {
+        self.kind.name()
+    }
+}
+
+impl From<BackendKind> for Devices {
+    fn from(kind: BackendKind) -> Self {
+        Self::new(kind)
+    }
+}
+
+impl From<&Devices> for Devices {
+    fn from(devices: &Devices) -> Self {
+        devices.clone()
+    }
+}
+
+impl fmt::Display for Devices {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Whether `device` computes on a GPU card: false for the CPU backends (flex, ndarray) and for
 /// a wgpu device on a software rasterizer such as Mesa's lavapipe, which reports no physical
 /// device. Opens the device.
@@ -135,6 +182,18 @@ pub fn heavy_test_backends() -> Vec<BackendKind> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_run_s_devices_are_one_backend_plain_and_with_autodiff() {
+        let d = Devices::from(BackendKind::Ndarray);
+        assert_eq!(d.kind, BackendKind::Ndarray);
+        assert_eq!(d.plain, BackendKind::Ndarray.device());
+        assert!(!d.plain.is_autodiff());
+        assert!(d.train.is_autodiff());
+        assert_eq!(d.train.clone().inner(), d.plain);
+        assert_eq!(d.to_string(), "ndarray");
+        assert_eq!(Devices::from(&d).train, d.train);
+    }
 
     #[test]
     fn parses_names_and_rejects_unknown() {

@@ -29,7 +29,7 @@ pub use gb_testdata::shared_data_guard;
 
 pub use assets::{assets_dir, tiny_prior_dir};
 pub use atomic::write_atomic;
-pub use backend::{heavy_test_backends, test_backends, BackendKind};
+pub use backend::{heavy_test_backends, test_backends, BackendKind, Devices};
 pub use image_io::{
     image_size, read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage,
 };

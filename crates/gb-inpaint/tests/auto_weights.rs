@@ -191,7 +191,7 @@ fn choose(s: &Scene, dir: &Path, clean: &Path, out: &Path) -> gb_inpaint::auto::
         config: &config,
         prompts: &prompts,
         oracle: Some(&images),
-        backend: KIND,
+        devices: KIND.into(),
         weights: gb_eval::default_weights_dir(),
         out,
         progress: false,

@@ -56,7 +56,7 @@ fn inputs<'a>(
         prompt: "RGB image, stairs",
         settings,
         references: &[],
-        backend: BackendKind::Flex,
+        devices: BackendKind::Flex.into(),
         out,
     }
 }

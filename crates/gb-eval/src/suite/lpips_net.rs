@@ -2,7 +2,8 @@
 
 use std::path::Path;
 
-use gb_core::{BackendKind, RgbImage};
+use burn::tensor::Device;
+use gb_core::RgbImage;
 
 use crate::error::MetricError;
 use crate::image_metrics::Region;
@@ -53,12 +54,11 @@ pub enum LpipsModel {
 
 impl LpipsModel {
     /// Loads `net` from `path`.
-    pub fn load(net: LpipsNet, path: &Path, device: BackendKind) -> Result<Self, MetricError> {
-        let device = device.device();
+    pub fn load(net: LpipsNet, path: &Path, device: &Device) -> Result<Self, MetricError> {
         Ok(match net {
-            LpipsNet::StAlex => LpipsModel::Shift(StLpips::load(path, &device)?),
-            LpipsNet::Alex => LpipsModel::Standard(Lpips::load(path, Backbone::Alex, &device)?),
-            LpipsNet::Vgg => LpipsModel::Standard(Lpips::load(path, Backbone::Vgg, &device)?),
+            LpipsNet::StAlex => LpipsModel::Shift(StLpips::load(path, device)?),
+            LpipsNet::Alex => LpipsModel::Standard(Lpips::load(path, Backbone::Alex, device)?),
+            LpipsNet::Vgg => LpipsModel::Standard(Lpips::load(path, Backbone::Vgg, device)?),
         })
     }
 

@@ -55,7 +55,7 @@ pub(super) fn lpips(ctx: &Ctx, m: &Metric, report: &mut EvalReport) -> Result<()
     let net = ctx.opts.lpips_net;
     let model = ctx
         .weights_file(net.weights_file())
-        .and_then(|p| LpipsModel::load(net, &p, ctx.opts.device).map_err(|e| e.to_string()));
+        .and_then(|p| LpipsModel::load(net, &p, &ctx.opts.device.plain).map_err(|e| e.to_string()));
     match model {
         Ok(model) => image_metric(ctx, m, report, &|p, g, r| model.distance(p, g, r)),
         Err(reason) => {
@@ -131,7 +131,7 @@ fn fid_metric(
     }
     let extractor = ctx
         .weights_file(crate::fid::WEIGHTS_FILE)
-        .and_then(|p| FidExtractor::load(&p, &ctx.opts.device.device()).map_err(|e| e.to_string()));
+        .and_then(|p| FidExtractor::load(&p, &ctx.opts.device.plain).map_err(|e| e.to_string()));
     let extractor = match extractor {
         Ok(x) => x,
         Err(reason) => {
@@ -250,7 +250,7 @@ pub(super) fn nima(ctx: &Ctx, m: &Metric, report: &mut EvalReport) -> Result<(),
         }),
     };
     let model =
-        path.and_then(|p| Nima::load(&p, &ctx.opts.device.device()).map_err(|e| e.to_string()));
+        path.and_then(|p| Nima::load(&p, &ctx.opts.device.plain).map_err(|e| e.to_string()));
     match model {
         Ok(model) => score_renders(ctx, m, report, &|img| {
             nima_score(&model, img).map_err(|e| e.to_string())

@@ -27,7 +27,7 @@ mod values;
 
 use std::path::PathBuf;
 
-use gb_core::BackendKind;
+use gb_core::Devices;
 use indicatif::{ProgressBar, ProgressStyle};
 
 pub use lpips_net::{LpipsModel, LpipsNet};
@@ -87,8 +87,8 @@ pub struct SuiteOptions {
     /// NIMA's weights file, when not the weights folder's
     /// `nima_inception_resnet_v2_ava.safetensors` (none ship with the project).
     pub nima_weights: Option<PathBuf>,
-    /// Backend of the network metrics.
-    pub device: BackendKind,
+    /// The devices of the network metrics (they run on `device.plain`).
+    pub device: Devices,
     /// The LPIPS network.
     pub lpips_net: LpipsNet,
     /// Minimum number of pairs for FID / D-FID.
@@ -100,12 +100,12 @@ pub struct SuiteOptions {
 impl SuiteOptions {
     /// Every metric, weights from `weights` or else [`crate::default_weights_dir`], ST-LPIPS,
     /// FID from [`FID_MIN_IMAGES`] pairs, no progress bars.
-    pub fn new(weights: Option<PathBuf>, device: BackendKind) -> Self {
+    pub fn new(weights: Option<PathBuf>, device: impl Into<Devices>) -> Self {
         Self {
             metrics: Selection::All,
             weights: weights.or_else(crate::default_weights_dir),
             nima_weights: None,
-            device,
+            device: device.into(),
             lpips_net: LpipsNet::default(),
             fid_min_images: FID_MIN_IMAGES,
             progress: false,

@@ -49,7 +49,7 @@ mod score;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use gb_core::{BackendKind, RgbImage};
+use gb_core::{Devices, RgbImage};
 use gb_nerf::scene::{Mask, Scene, Split};
 use gb_nerf::train::data::downscale_mask;
 use gb_nerf::train::NerfConfig;
@@ -164,8 +164,8 @@ pub struct AutoInputs<'a> {
     /// The oracle's object-free images per training view (training resolution), if the
     /// method has an `[oracle]`.
     pub oracle: Option<&'a [Option<RgbImage>]>,
-    /// The backend.
-    pub backend: BackendKind,
+    /// The run's devices.
+    pub devices: Devices,
     /// The metric weights folder (ST-LPIPS).
     pub weights: Option<PathBuf>,
     /// The run folder (the cache lives in `OUT/auto/`).
@@ -447,7 +447,7 @@ fn shared_prefix(
     let mut config = i.config.clone();
     config.train.steps = steps;
     let none = MethodConfig::builtin("none")?;
-    let mut t = GuidedTrainer::new_withholding(scene, config, none, None, i.backend, objects)?;
+    let mut t = GuidedTrainer::new_withholding(scene, config, none, None, &i.devices, objects)?;
     t.fit(&FitOptions {
         checkpoint: None,
         log: None,
@@ -479,7 +479,7 @@ fn trial(
     let nerf = GuidedTrainer::withholding_base(
         setup.scene,
         config,
-        i.backend,
+        &i.devices,
         setup.objects,
         setup.prefix,
     )?;

@@ -129,7 +129,7 @@ pub(super) fn score(
         &all,
         &hole_of,
         scored.len(),
-        SuiteOptions::new(i.weights.clone(), i.backend),
+        SuiteOptions::new(i.weights.clone(), &i.devices),
     )
 }
 

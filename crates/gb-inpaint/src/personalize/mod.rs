@@ -31,7 +31,7 @@ pub mod patches;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use gb_core::{BackendKind, RgbImage};
+use gb_core::{Devices, RgbImage};
 use gb_finetune::train::batch::make_batch;
 use gb_finetune::train::loss::inpainting_loss;
 use gb_finetune::train::{FinetuneTrainer, PriorModels};
@@ -149,8 +149,8 @@ pub struct PersonalizeInputs<'a> {
     pub settings: &'a PersonalizeSettings,
     /// The run's reference views: their images are trained on, masked region included.
     pub references: &'a [crate::reference::ReferenceView],
-    /// The backend to train on.
-    pub backend: BackendKind,
+    /// The run's devices; training is on `devices.train`.
+    pub devices: Devices,
     /// The run folder (the cache lives in `OUT/personalize/`).
     pub out: &'a Path,
 }
@@ -215,7 +215,7 @@ pub fn scene_patches(i: &PersonalizeInputs) -> Result<ScenePatches, InpaintError
 /// The fine-tuning run of the per-scene LoRA: the prior with the method's LoRA merged, fresh
 /// adapters attached, on the autodiff device of the run's backend.
 pub fn new_trainer(i: &PersonalizeInputs) -> Result<FinetuneTrainer, InpaintError> {
-    let device = i.backend.autodiff_device();
+    let device = i.devices.train.clone();
     let base = i.lora.map(crate::prior::read_lora).transpose()?;
     let models = PriorModels::load_merged(i.prior, base.as_ref(), &device)
         .map_err(finetune_err("loading the prior"))?;

@@ -69,7 +69,7 @@ pub fn write_config(spec: &RunSpec, r: &ResolvedRun) -> Result<(), InpaintError>
         ),
         format!("--preset {}", shell_quote(&cfg)),
         format!("--method {}", shell_quote(&cfg)),
-        format!("--device {}", r.trainer.backend.name()),
+        format!("--device {}", spec.device.name()),
         format!("--out {}", shell_quote(&spec.out.display().to_string())),
     ];
     match r.prior {
@@ -102,7 +102,7 @@ pub fn write_config(spec: &RunSpec, r: &ResolvedRun) -> Result<(), InpaintError>
     run.insert("scene".into(), scene.display().to_string().into());
     run.insert("method".into(), r.method.name.clone().into());
     run.insert("preset".into(), trainer.config.name.clone().into());
-    run.insert("device".into(), trainer.backend.name().into());
+    run.insert("device".into(), spec.device.name().into());
     run.insert("steps".into(), (trainer.config.train.steps as i64).into());
     run.insert(
         "normal_start".into(),

@@ -22,7 +22,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use burn::tensor::Device;
-use gb_core::{BackendKind, Precision};
+use gb_core::{BackendKind, Devices, Precision};
 use gb_eval::suite::{evaluate, PairSet, SuiteOptions};
 use gb_nerf::train::DepthSupervision;
 
@@ -182,6 +182,7 @@ fn method_prior(
     spec: &RunSpec,
     method: &crate::MethodConfig,
     prior_spec: Option<&str>,
+    device: &Device,
 ) -> Result<Option<SdPrior>, InpaintError> {
     if !method.needs_prior() {
         if let Some(p) = spec.prior.as_deref().filter(|p| *p != "none") {
@@ -204,15 +205,14 @@ fn method_prior(
     let dir = gb_diffusion::checkpoint::resolve_prior(prior_spec)?;
     let lora = lora_for(method, &dir, spec.lora.as_deref())?;
     tracing::info!(prior = %dir.display(), lora = ?lora, "loading the prior");
-    let device = spec.device.device();
-    let precision = prior_precision(spec, &device)?;
+    let precision = prior_precision(spec, device)?;
     tracing::info!(%precision, "prior precision");
     let opts = crate::prior::PriorOptions {
         lora,
         personal: None,
         precision: Some(precision),
     };
-    Ok(Some(crate::prior::load_prior(&dir, &opts, &device)?))
+    Ok(Some(crate::prior::load_prior(&dir, &opts, device)?))
 }
 
 /// The precision of the run's prior: `--precision` when the device has it, else the device's
@@ -227,6 +227,7 @@ fn prior_precision(spec: &RunSpec, device: &Device) -> Result<Precision, Inpaint
 /// Personalises `prior` to the scene when the method asks for it ([`crate::personalize`]):
 /// trains or reuses `OUT/personalize/lora.safetensors`, then reloads the prior with it
 /// merged. A method without a prior ignores the setting, with a note in the log.
+#[allow(clippy::too_many_arguments)]
 fn personalize_prior(
     spec: &RunSpec,
     method: &crate::MethodConfig,
@@ -234,6 +235,7 @@ fn personalize_prior(
     config: &gb_nerf::train::NerfConfig,
     prompts: &crate::Prompts,
     references: &[crate::reference::ReferenceView],
+    devices: &Devices,
     prior: &mut Option<SdPrior>,
 ) -> Result<Option<PersonalizeReport>, InpaintError> {
     if !method.personalize.enabled() {
@@ -254,7 +256,7 @@ fn personalize_prior(
         prompt: &prompts.appearance,
         settings: &method.personalize,
         references,
-        backend: spec.device,
+        devices: devices.clone(),
         out: &spec.out,
     })?;
     let opts = crate::prior::PriorOptions {
@@ -265,7 +267,7 @@ fn personalize_prior(
     *prior = Some(crate::prior::load_prior(
         &info.folder,
         &opts,
-        &spec.device.device(),
+        &devices.plain,
     )?);
     Ok(Some(report))
 }
@@ -273,7 +275,8 @@ fn personalize_prior(
 /// Runs one object removal (see the module docs) and returns what it measured, also
 /// written as `OUT/metrics.json`.
 pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
-    let device = spec.device;
+    // the one place `--device` becomes devices: everything below is handed these
+    let devices = Devices::new(spec.device);
     setup::check_paths(spec)?;
     let (method_name, prior_spec) = method_and_prior(spec);
     let mut method = load_method(&method_name)?;
@@ -299,7 +302,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     if let Some(depth) = spec.depth {
         config.train.depth = depth;
     }
-    let mut prior = method_prior(spec, &method, prior_spec.as_deref())?;
+    let mut prior = method_prior(spec, &method, prior_spec.as_deref(), &devices.plain)?;
 
     let (scene_dir, mut scene) = setup::load_or_generate(spec)?;
     setup::require_masks(&scene)?;
@@ -344,6 +347,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         &config,
         &prompts,
         &references,
+        &devices,
         &mut prior,
     )?;
     let oracle_images = method
@@ -367,7 +371,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
                 config: &config,
                 prompts: &prompts,
                 oracle: oracle_images.as_deref(),
-                backend: device,
+                devices: devices.clone(),
                 weights: spec.weights.clone(),
                 out,
                 progress: spec.progress,
@@ -409,7 +413,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         tracing::info!("geometry: the checkpoint is finished, so no unguided pass");
     }
     let (hidden_depth, unguided_seconds) = if holds_geometry && !finished {
-        let (targets, seconds) = unguided_depth(&scene, &config, &method, device, spec.progress)?;
+        let (targets, seconds) = unguided_depth(&scene, &config, &method, &devices, spec.progress)?;
         (Some(targets), Some(seconds))
     } else {
         (None, None)
@@ -424,11 +428,11 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
                 parts,
                 method.clone(),
                 guidance,
-                device,
+                &devices,
                 config,
             )?
         }
-        None => GuidedTrainer::new(&scene, config, method.clone(), guidance, device)?,
+        None => GuidedTrainer::new(&scene, config, method.clone(), guidance, &devices)?,
     };
     if !references.is_empty() {
         tracing::info!(
@@ -468,7 +472,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     )?;
     tracing::info!(
         scene = %scene.name, preset = %trainer.config.name, method = %method.name,
-        device = %device, train_views = trainer.data.views.len(),
+        device = %devices, train_views = trainer.data.views.len(),
         pixels = trainer.data.pixels.len(), steps = trainer.config.train.steps,
         guided_views = trainer.guidance.as_ref().map_or(0, |g| g.views.len()),
         normal_start = trainer.normal_start(),
@@ -514,7 +518,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
             &tested.pairs
         })
     };
-    let eval = evaluate(&scored, &SuiteOptions::new(spec.weights.clone(), device))?;
+    let eval = evaluate(&scored, &SuiteOptions::new(spec.weights.clone(), &devices))?;
     let views = tested.metrics(&eval);
     let eval_seconds = eval_start.elapsed().as_secs_f64();
     let orbit = crate::gif::write_orbit(out, &scene, &trainer, spec.orbit_frames)?;
@@ -537,7 +541,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         lora: prior_info.as_ref().and_then(|p| p.lora.clone()),
         scene: scene.name.clone(),
         preset: trainer.config.name.clone(),
-        device: device.name().to_string(),
+        device: devices.name().to_string(),
         steps: trainer.step,
         train_seconds_this_run: fit.seconds,
         unguided_seconds,
@@ -597,12 +601,12 @@ fn unguided_depth(
     scene: &gb_nerf::scene::Scene,
     config: &gb_nerf::train::NerfConfig,
     method: &crate::MethodConfig,
-    device: gb_core::BackendKind,
+    devices: &Devices,
     progress: bool,
 ) -> Result<(crate::geometry::HiddenDepth, f64), InpaintError> {
     let start = Instant::now();
     let none = crate::MethodConfig::builtin("none")?;
-    let mut unguided = GuidedTrainer::new(scene, config.clone(), none, None, device)?;
+    let mut unguided = GuidedTrainer::new(scene, config.clone(), none, None, devices)?;
     unguided.fit(&FitOptions {
         checkpoint: None,
         log: None,

@@ -13,7 +13,7 @@ impl GuidedTrainer {
         path: &Path,
         method: MethodConfig,
         guidance: Option<(SdPrior, Prompts)>,
-        backend: BackendKind,
+        devices: impl Into<Devices>,
         steps: Option<usize>,
     ) -> Result<Self, InpaintError> {
         let parts = nerf_checkpoint::load(path)?;
@@ -21,7 +21,7 @@ impl GuidedTrainer {
         if let Some(s) = steps {
             config.train.steps = s;
         }
-        Self::resume_parts(scene, path, parts, config, method, guidance, backend, false)
+        Self::resume_parts(scene, path, parts, config, method, guidance, devices, false)
     }
 
     /// A trainer that only renders: the field, occupancy grid and preset of the checkpoint
@@ -31,9 +31,9 @@ impl GuidedTrainer {
     pub fn for_rendering(
         scene: &Scene,
         path: &Path,
-        backend: BackendKind,
+        devices: impl Into<Devices>,
     ) -> Result<Self, InpaintError> {
-        let nerf = gb_nerf::train::Trainer::resume(scene, path, backend)?;
+        let nerf = gb_nerf::train::Trainer::resume(scene, path, devices)?;
         Self::from_base(nerf, scene, MethodConfig::builtin("none")?, None)
     }
 
@@ -49,11 +49,11 @@ impl GuidedTrainer {
         parts: CheckpointParts,
         method: MethodConfig,
         guidance: Option<(SdPrior, Prompts)>,
-        backend: BackendKind,
+        devices: impl Into<Devices>,
         config: NerfConfig,
     ) -> Result<Self, InpaintError> {
         resume::check_preset(path, &parts.meta.config(path)?, &config)?;
-        Self::resume_parts(scene, path, parts, config, method, guidance, backend, true)
+        Self::resume_parts(scene, path, parts, config, method, guidance, devices, true)
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -64,7 +64,7 @@ impl GuidedTrainer {
         config: NerfConfig,
         method: MethodConfig,
         guidance: Option<(SdPrior, Prompts)>,
-        backend: BackendKind,
+        devices: impl Into<Devices>,
         strict: bool,
     ) -> Result<Self, InpaintError> {
         let bad = |reason: String| gb_nerf::train::NerfError::Checkpoint {
@@ -94,7 +94,7 @@ impl GuidedTrainer {
             }
             None => {}
         }
-        let nerf = Trainer::resume_from(scene, path, parts, config, backend)?;
+        let nerf = Trainer::resume_from(scene, path, parts, config, devices)?;
         let mut t = Self::from_base(nerf, scene, method, guidance)?;
         if let Some(st) = state {
             t.totals = st.totals;

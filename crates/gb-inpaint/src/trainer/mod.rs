@@ -44,9 +44,9 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use burn::tensor::Tensor;
+use burn::tensor::{Device, Tensor};
 use gb_core::psnr::{psnr_from_mse, LOG_MIN_MSE};
-use gb_core::BackendKind;
+use gb_core::Devices;
 use gb_diffusion::distill::prior_input::compose;
 use gb_diffusion::distill::{
     DistillSettings, PriorInputMode, PromptCache, PromptEmbeddings, StepDiagnostics,
@@ -91,7 +91,7 @@ pub struct GuidanceState {
     /// Per-view observed maps of the visibility-aware guidance (recomputed as they age).
     visibility: HashMap<usize, ObservedMap>,
     /// Plain device of the prior.
-    device: burn::tensor::Device,
+    device: Device,
 }
 
 /// One guidance term of a step, as logged.
@@ -311,7 +311,7 @@ impl GuidanceState {
         prompts: Prompts,
         data: &TrainData,
         scene: &str,
-        backend: BackendKind,
+        device: Device,
     ) -> Result<Self, InpaintError> {
         let views: Vec<usize> = data
             .views
@@ -349,7 +349,7 @@ impl GuidanceState {
             views,
             cache: HashMap::new(),
             visibility: HashMap::new(),
-            device: backend.device(),
+            device,
         })
     }
 

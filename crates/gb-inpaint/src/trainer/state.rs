@@ -10,10 +10,10 @@ impl GuidedTrainer {
         config: NerfConfig,
         method: MethodConfig,
         guidance: Option<(SdPrior, Prompts)>,
-        backend: BackendKind,
+        devices: impl Into<Devices>,
     ) -> Result<Self, InpaintError> {
         Self::from_base(
-            Trainer::new(scene, config, backend)?,
+            Trainer::new(scene, config, devices)?,
             scene,
             method,
             guidance,
@@ -28,10 +28,10 @@ impl GuidedTrainer {
         config: NerfConfig,
         method: MethodConfig,
         guidance: Option<(SdPrior, Prompts)>,
-        backend: BackendKind,
+        devices: impl Into<Devices>,
         withheld: &[Option<gb_nerf::scene::Mask>],
     ) -> Result<Self, InpaintError> {
-        let nerf = Self::withholding_base(scene, config, backend, withheld, None)?;
+        let nerf = Self::withholding_base(scene, config, devices, withheld, None)?;
         Self::from_base(nerf, scene, method, guidance)
     }
 
@@ -43,11 +43,11 @@ impl GuidedTrainer {
     pub(crate) fn withholding_base(
         scene: &Scene,
         config: NerfConfig,
-        backend: BackendKind,
+        devices: impl Into<Devices>,
         withheld: &[Option<gb_nerf::scene::Mask>],
         prefix: Option<&Path>,
     ) -> Result<Trainer, InpaintError> {
-        let mut nerf = Trainer::new(scene, config, backend)?;
+        let mut nerf = Trainer::new(scene, config, devices)?;
         nerf.withhold(withheld)?;
         Ok(match prefix {
             Some(path) => Trainer::restore(nerf, path, nerf_checkpoint::load(path)?)?,
@@ -88,7 +88,7 @@ impl GuidedTrainer {
                 prompts,
                 &nerf.data,
                 &scene.name,
-                nerf.backend,
+                nerf.devices.plain.clone(),
             )?),
             (true, None) => {
                 return Err(InpaintError::PriorRequired {

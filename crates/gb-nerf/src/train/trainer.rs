@@ -9,7 +9,7 @@ use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::store::ModuleRecord;
 use burn::tensor::{Bytes, Tensor, TensorData};
-use gb_core::{read_f32, BackendKind};
+use gb_core::{read_f32, Devices};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -85,8 +85,8 @@ pub struct Trainer {
     pub occupancy: Option<OccupancyGrid>,
     /// Steps completed.
     pub step: usize,
-    /// Backend it runs on.
-    pub backend: BackendKind,
+    /// The devices it runs on (the field lives on `devices.train`).
+    pub devices: Devices,
     optimizer: ModuleOptimizer,
     rng: ChaCha8Rng,
     has_depth: bool,
@@ -95,8 +95,13 @@ pub struct Trainer {
 }
 
 impl Trainer {
-    /// A fresh trainer for `scene`.
-    pub fn new(scene: &Scene, config: NerfConfig, backend: BackendKind) -> Result<Self, NerfError> {
+    /// A fresh trainer for `scene`, on `devices` (a run's [`Devices`], or a [`gb_core::BackendKind`]).
+    pub fn new(
+        scene: &Scene,
+        config: NerfConfig,
+        devices: impl Into<Devices>,
+    ) -> Result<Self, NerfError> {
+        let devices = devices.into();
         let depth = config.train.depth;
         let data = TrainData::from_scene(scene, config.train.image_downscale, depth)?;
         if !(scene.near.is_finite() && scene.far.is_finite() && scene.near < scene.far) {
@@ -105,7 +110,7 @@ impl Trainer {
                 reason: format!("invalid bounds near {} far {}", scene.near, scene.far),
             });
         }
-        let device = backend.autodiff_device();
+        let device = devices.train.clone();
         device.seed(config.train.seed);
         let field = config.field.init(&device);
         let space = SceneSpace::from_scene(scene);
@@ -133,7 +138,7 @@ impl Trainer {
             field,
             occupancy: None,
             step: 0,
-            backend,
+            devices,
             optimizer: AdamConfig::new().with_epsilon(1e-15).init(),
             rng: ChaCha8Rng::seed_from_u64(config.train.seed),
             has_depth,
@@ -435,10 +440,14 @@ impl Trainer {
     /// occupancy grid, step and the exact position of the random stream, so that it
     /// continues as the uninterrupted run would. Errors (naming the file) when the
     /// checkpoint was written for other training data.
-    pub fn resume(scene: &Scene, path: &Path, backend: BackendKind) -> Result<Self, NerfError> {
+    pub fn resume(
+        scene: &Scene,
+        path: &Path,
+        devices: impl Into<Devices>,
+    ) -> Result<Self, NerfError> {
         let parts = checkpoint::load(path)?;
         let config = parts.meta.config(path)?;
-        Self::resume_from(scene, path, parts, config, backend)
+        Self::resume_from(scene, path, parts, config, devices)
     }
 
     /// [`Self::resume`] from checkpoint parts already read from `path`, training with
@@ -449,9 +458,9 @@ impl Trainer {
         path: &Path,
         parts: CheckpointParts,
         config: NerfConfig,
-        backend: BackendKind,
+        devices: impl Into<Devices>,
     ) -> Result<Self, NerfError> {
-        Self::restore(Self::new(scene, config, backend)?, path, parts)
+        Self::restore(Self::new(scene, config, devices)?, path, parts)
     }
 
     /// Restores the state of the checkpoint `parts` (read from `path`) into `t`, a fresh
