@@ -5,12 +5,10 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
-use burn::tensor::{Tensor, TensorData};
 use gb_core::{read_rgb, write_rgb_png, BackendKind, RgbImage};
-use gb_diffusion::distill::sd_adapter::SdPrior;
+use gb_diffusion::distill::image::{ImageDistillConfig, ImageDistillation};
 use gb_diffusion::distill::{
-    distill_view, DistillSettings, GuidanceMethod, PriorInputMode, PriorModels, PromptCache,
-    ScoreDistiller, TimestepConfig, ViewConditioning, Weighting,
+    DistillSettings, GuidanceMethod, PriorOptions, SdPrior, TimestepConfig, Weighting,
 };
 use indicatif::ProgressStyle;
 
@@ -77,7 +75,6 @@ pub struct Args {
 
 /// Runs the playground.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let kind = args.device.unwrap_or_default();
     if args.steps == 0 || args.save_every == 0 {
         bail!("--steps and --save-every must be > 0");
     }
@@ -89,54 +86,46 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
 
-    let device = kind.device();
+    let device = args.device.unwrap_or_default().device();
     let prior_dir = gb_diffusion::checkpoint::resolve_prior(&args.prior)?;
-    let prior = SdPrior::load(
-        &prior_dir,
-        &gb_diffusion::distill::PriorOptions::default(),
-        &device,
-    )
-    .with_context(|| format!("loading the prior from {}", prior_dir.display()))?;
-    let resolution = args.resolution.unwrap_or(prior.resolution);
+    let prior = SdPrior::load(&prior_dir, &PriorOptions::default(), &device)
+        .with_context(|| format!("loading the prior from {}", prior_dir.display()))?;
     let guidance = GuidanceMethod::from_weights(&args.method, args.w1, args.w2, args.w3)
         .with_context(|| format!("--method {}: expected sds, csd or bsd", args.method))?;
-    let settings = DistillSettings {
-        guidance,
-        timesteps: TimestepConfig::default(),
-        weighting: if args.constant_weight {
-            Weighting::Constant
-        } else {
-            Weighting::OneMinusAlphaBar
+    let cfg = ImageDistillConfig {
+        settings: DistillSettings {
+            guidance,
+            timesteps: TimestepConfig::default(),
+            weighting: if args.constant_weight {
+                Weighting::Constant
+            } else {
+                Weighting::OneMinusAlphaBar
+            },
+            grad_clamp: args.grad_clamp,
         },
-        grad_clamp: args.grad_clamp,
+        lr: f64::from(args.lr),
+        seed: args.seed,
+        resolution: args.resolution,
     };
-    let mut distiller = ScoreDistiller::new(&settings, prior.alphas.clone(), args.seed)?;
-    let (w, h) = (image.width, image.height);
-    let gt = to_tensor(&image, &device);
-    let mask_t = Tensor::<4>::from_data(TensorData::new(mask.clone(), [1, 1, h, w]), &device);
-    let view = ViewConditioning::new(0, &prior.encoder, gt.clone(), mask_t, resolution)?;
-    let mut prompts_cache = PromptCache::new();
-    let prompts = prompts_cache.for_guidance(
-        &prior.text,
-        distiller.guidance(),
+    let mut distillation = ImageDistillation::new(
+        &prior,
+        &image,
+        &mask,
         &args.prompt,
         &args.negative_prompt,
+        &cfg,
     )?;
-    let models = PriorModels {
-        unet: &prior.unet,
-        encoder: &prior.encoder,
-    };
     tracing::info!(
-        method = distiller.guidance().name(),
-        resolution,
-        bbox = ?view.bbox,
-        "distilling {} ({w}x{h}) for {} steps",
+        method = distillation.guidance_name(),
+        resolution = distillation.resolution(),
+        bbox = ?distillation.mask_box(),
+        "distilling {} ({}x{}) for {} steps",
         args.image.display(),
+        image.width,
+        image.height,
         args.steps
     );
 
-    let mut pixels = gt.clone();
-    let mut adam = Adam::new(&pixels, args.lr);
     let mut snapshots = vec![image.clone()];
     let mut log = String::new();
     let bar = gb_core::progress::bar(args.steps as u64);
@@ -145,22 +134,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     for step in 1..=args.steps {
-        let render = pixels.clone().autodiff().require_grad();
-        let out = distill_view(
-            &mut distiller,
-            &models,
-            render.clone(),
-            &view,
-            0,
-            PriorInputMode::PasteOnGroundTruth,
-            &prompts,
-        )?;
-        let grads = out.loss.backward();
-        let grad = render
-            .grad(&grads)
-            .context("no gradient reached the pixels")?;
-        pixels = adam.step(pixels, grad).clamp(0.0, 1.0);
-        let d = &out.diagnostics;
+        let d = distillation.step()?;
         bar.set_message(format!(
             "t={} loss={:.3e} |g|={:.3e}",
             d.timestep, d.loss, d.grad_norm
@@ -179,7 +153,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }))?);
         log.push('\n');
         if step % args.save_every == 0 || step == args.steps {
-            let snap = to_image(pixels.clone(), w, h)?;
+            let snap = distillation.image()?;
             write_rgb_png(&args.out.join(format!("step_{step:05}.png")), &snap)?;
             snapshots.push(snap);
         }
@@ -217,28 +191,6 @@ fn read_mask(path: &Path, width: usize, height: usize) -> anyhow::Result<Vec<f32
         .collect())
 }
 
-fn to_tensor(img: &RgbImage, device: &burn::tensor::Device) -> Tensor<4> {
-    let hwc = Tensor::<3>::from_data(
-        TensorData::new(img.data.clone(), [img.height, img.width, 3]),
-        device,
-    );
-    hwc.permute([2, 0, 1]).unsqueeze()
-}
-
-fn to_image(t: Tensor<4>, width: usize, height: usize) -> anyhow::Result<RgbImage> {
-    let data = t
-        .squeeze_dim::<3>(0)
-        .permute([1, 2, 0])
-        .into_data()
-        .try_into_vec_as::<f32>()
-        .map_err(|e| anyhow::anyhow!("reading the image back: {e:?}"))?;
-    Ok(RgbImage {
-        width,
-        height,
-        data,
-    })
-}
-
 /// The snapshots side by side (input first).
 fn grid(images: &[RgbImage]) -> RgbImage {
     let (w, h) = (images[0].width, images[0].height);
@@ -251,33 +203,4 @@ fn grid(images: &[RgbImage]) -> RgbImage {
         }
     }
     out
-}
-
-/// Adam on a plain tensor.
-struct Adam {
-    m: Tensor<4>,
-    v: Tensor<4>,
-    lr: f32,
-    t: i32,
-}
-
-impl Adam {
-    fn new(like: &Tensor<4>, lr: f32) -> Self {
-        Self {
-            m: like.zeros_like(),
-            v: like.zeros_like(),
-            lr,
-            t: 0,
-        }
-    }
-
-    fn step(&mut self, p: Tensor<4>, g: Tensor<4>) -> Tensor<4> {
-        let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-8f32);
-        self.t += 1;
-        self.m = self.m.clone().mul_scalar(b1) + g.clone().mul_scalar(1.0 - b1);
-        self.v = self.v.clone().mul_scalar(b2) + g.powi_scalar(2).mul_scalar(1.0 - b2);
-        let m_hat = self.m.clone().div_scalar(1.0 - b1.powi(self.t));
-        let v_hat = self.v.clone().div_scalar(1.0 - b2.powi(self.t));
-        p - m_hat.mul_scalar(self.lr) / (v_hat.sqrt().add_scalar(eps))
-    }
 }

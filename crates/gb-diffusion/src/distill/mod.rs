@@ -13,6 +13,8 @@
 //!   `w(t)`; [`alphas`]: the noise schedule.
 //! - [`prior_input`], [`conditioning`], [`view_step`]: crop/resize/paste of the render,
 //!   cached view and prompt conditioning, the step on a rendered view.
+//! - [`image`]: distillation straight into an image's masked pixels, with Burn's Adam (the
+//!   2D playground of `distill-image`).
 //! - [`sd_adapter`]: the crate's U-Net and VAE encoder behind those interfaces, and
 //!   [`SdPrior`], the one prior type, which holds them and CLIP's prompt encoder.
 
@@ -26,6 +28,7 @@ pub mod error;
 pub mod gradient;
 pub mod guidance;
 pub mod guidance_method;
+pub mod image;
 pub mod noise;
 pub mod oracle;
 pub mod prior_input;

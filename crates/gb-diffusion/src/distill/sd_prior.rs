@@ -70,6 +70,8 @@ pub struct SdPrior {
     pub alphas: AlphasCumprod,
     /// The prior's native image resolution (`unet.sample_size * factor`, 512 for SD 1.5).
     pub resolution: usize,
+    /// The plain device of the U-Net and text encoder (the VAE runs on its autodiff version).
+    pub device: Device,
     /// What was loaded (the LoRA fields are the loader's to fill).
     pub info: PriorInfo,
 }
@@ -167,6 +169,7 @@ impl SdPrior {
             ),
             alphas,
             resolution,
+            device: device.clone(),
         }
     }
 }

@@ -5,6 +5,7 @@ mod extremes;
 mod finite_diff;
 mod fixture;
 mod formulas;
+mod image;
 mod mask;
 mod oracle;
 mod sd_prior;
