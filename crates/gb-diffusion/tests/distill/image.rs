@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use gb_core::{read_gray, read_rgb, BackendKind};
+use gb_core::{read_gray, read_rgb, BackendKind, RgbImage};
 use gb_diffusion::distill::image::{ImageDistillConfig, ImageDistillation};
 use gb_diffusion::distill::{DistillError, DistillSettings, SdPrior};
 
@@ -13,8 +13,8 @@ fn fixture(path: &str) -> PathBuf {
         .join(path)
 }
 
-#[test]
-fn adam_moves_only_the_masked_pixels_by_its_learning_rate_on_the_first_step() {
+/// The tiny inpainting prior (resolution 32) and its fixture image.
+fn tiny_prior_and_image() -> (SdPrior, RgbImage) {
     let prior = SdPrior::load(
         &fixture("pipeline"),
         &gb_diffusion::distill::PriorOptions::default(),
@@ -22,17 +22,28 @@ fn adam_moves_only_the_masked_pixels_by_its_learning_rate_on_the_first_step() {
     )
     .expect("tiny prior");
     let image = read_rgb(&fixture("pipeline_image.png"), None).expect("image");
+    (prior, image)
+}
+
+/// BSD at the paper's weights, with Adam at `lr`.
+fn config(lr: f64, seed: u64) -> ImageDistillConfig {
+    ImageDistillConfig {
+        settings: DistillSettings::paper_rgb(),
+        lr,
+        seed,
+        resolution: None,
+    }
+}
+
+#[test]
+fn adam_moves_only_the_masked_pixels_by_its_learning_rate_on_the_first_step() {
+    let (prior, image) = tiny_prior_and_image();
     let (_, _, grey) = read_gray(&fixture("pipeline_mask.png")).expect("mask");
     let mask: Vec<f32> = grey.iter().map(|v| f32::from(*v >= 0.5)).collect();
     let inside = mask.iter().filter(|m| **m > 0.0).count();
     assert!(inside > 0 && inside < mask.len());
     let lr = 0.01;
-    let cfg = ImageDistillConfig {
-        settings: DistillSettings::paper_rgb(),
-        lr,
-        seed: 3,
-        resolution: None,
-    };
+    let cfg = config(lr, 3);
     let mut d = ImageDistillation::new(&prior, &image, &mask, "a photo", "blurry", &cfg)
         .expect("distillation");
     assert_eq!(d.resolution(), 32);
@@ -74,19 +85,8 @@ fn adam_moves_only_the_masked_pixels_by_its_learning_rate_on_the_first_step() {
 
 #[test]
 fn a_mask_of_another_size_and_a_zero_learning_rate_are_refused() {
-    let prior = SdPrior::load(
-        &fixture("pipeline"),
-        &gb_diffusion::distill::PriorOptions::default(),
-        &BackendKind::Flex.device(),
-    )
-    .expect("tiny prior");
-    let image = read_rgb(&fixture("pipeline_image.png"), None).expect("image");
-    let mut cfg = ImageDistillConfig {
-        settings: DistillSettings::paper_rgb(),
-        lr: 0.01,
-        seed: 0,
-        resolution: None,
-    };
+    let (prior, image) = tiny_prior_and_image();
+    let mut cfg = config(0.01, 0);
     let short = vec![1.0; image.width * image.height - 1];
     let err = ImageDistillation::new(&prior, &image, &short, "a", "", &cfg).err();
     assert!(
