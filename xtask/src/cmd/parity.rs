@@ -22,7 +22,7 @@ use anyhow::{bail, Context};
 use burn::module::Module;
 use burn::tensor::Tensor;
 use gb_core::{BackendKind, Precision};
-use gb_diffusion::checkpoint::hub::{self, is_hub_id};
+use gb_diffusion::checkpoint::hub;
 use gb_diffusion::checkpoint::{keymap, DiffusersFolder, WeightVariant};
 use gb_diffusion::clip::load_text_encoder;
 use gb_diffusion::lora::{apply_lora, LoraComponent, LoraFile};
@@ -147,21 +147,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A local folder as is; otherwise a hub id, from the hf-hub cache or downloaded.
+/// The folder of `--model` through the one resolver (`tiny`, a folder, or a hub id from the
+/// hf-hub cache or downloaded, at `--hub-endpoint` when given).
 fn resolve_model(spec: &str, endpoint: Option<&str>) -> anyhow::Result<PathBuf> {
-    let path = Path::new(spec);
-    if path.is_dir() {
-        return Ok(path.to_path_buf());
-    }
-    if is_hub_id(spec) {
-        let settings = hub::HubSettings::from_env();
-        let settings = match endpoint {
-            Some(e) => settings.with_endpoint(e),
-            None => settings,
-        };
-        return Ok(hub::resolve(spec, &settings)?);
-    }
-    bail!("--model {spec}: neither a folder nor a hub id (owner/name)")
+    let settings = hub::HubSettings::from_env();
+    let settings = match endpoint {
+        Some(e) => settings.with_endpoint(e),
+        None => settings,
+    };
+    gb_diffusion::checkpoint::locate_model(spec, &settings).context("--model")
 }
 
 fn run_tokenizer(

@@ -25,5 +25,5 @@ pub use error::CheckpointError;
 pub use folder::{DiffusersFolder, WeightVariant};
 pub use keymap::KeymapSection;
 pub use load::{load_module, LoadReport};
-pub use resolve::{resolve_prior, PriorSpec};
+pub use resolve::{locate_model, resolve_prior, resolve_prior_with, PriorSpec};
 pub use save::save_module;

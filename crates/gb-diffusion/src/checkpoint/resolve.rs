@@ -41,8 +41,8 @@ impl PriorSpec {
         })
     }
 
-    /// The local folder, downloading a hub id into the hub cache when allowed.
-    fn locate(&self, spec: &str) -> Result<PathBuf, CheckpointError> {
+    /// The local folder, downloading a hub id into the hub cache when `hub` allows.
+    fn locate(&self, spec: &str, hub: &HubSettings) -> Result<PathBuf, CheckpointError> {
         match self {
             Self::Tiny => {
                 let dir = gb_core::tiny_prior_dir();
@@ -60,31 +60,73 @@ impl PriorSpec {
                 Ok(dir)
             }
             Self::Folder(dir) => Ok(dir.clone()),
-            Self::Hub(id) => hub::resolve(id, &HubSettings::from_env()),
+            Self::Hub(id) => hub::resolve(id, hub),
         }
     }
 }
 
 /// The diffusers folder of `spec` (see the module docs), checked to be a pipeline folder
-/// whose weight-holding components have `.safetensors` weights. Errors name `spec`.
+/// whose weight-holding components have `.safetensors` weights, with the hub settings of the
+/// environment ([`HubSettings::from_env`]). Errors name `spec`.
 pub fn resolve_prior(spec: &str) -> Result<PathBuf, CheckpointError> {
-    let wrap = |e: CheckpointError| match e {
+    resolve_prior_with(spec, &HubSettings::from_env())
+}
+
+/// [`resolve_prior`] with the hub settings `hub` (an endpoint of the caller's, say).
+pub fn resolve_prior_with(spec: &str, hub: &HubSettings) -> Result<PathBuf, CheckpointError> {
+    let dir = locate_model(spec, hub)?;
+    DiffusersFolder::open(&dir)
+        .and_then(|folder| folder.check_weight_formats())
+        .map_err(|e| wrap_for(spec, e))?;
+    Ok(dir)
+}
+
+/// The local folder that `spec` names, with nothing in it checked: what [`resolve_prior`]
+/// then checks as a whole pipeline, and what a reader of single components (`parity
+/// --model`) opens itself. Errors name `spec`.
+pub fn locate_model(spec: &str, hub: &HubSettings) -> Result<PathBuf, CheckpointError> {
+    PriorSpec::parse(spec)?
+        .locate(spec, hub)
+        .map_err(|e| wrap_for(spec, e))
+}
+
+/// `e` with `spec` named, unless it names it already.
+fn wrap_for(spec: &str, e: CheckpointError) -> CheckpointError {
+    match e {
         e @ (CheckpointError::PriorSpec { .. } | CheckpointError::Prior { .. }) => e,
         e => CheckpointError::Prior {
             spec: spec.to_string(),
             source: Box::new(e),
         },
-    };
-    let dir = PriorSpec::parse(spec)?.locate(spec).map_err(wrap)?;
-    DiffusersFolder::open(&dir)
-        .and_then(|folder| folder.check_weight_formats())
-        .map_err(wrap)?;
-    Ok(dir)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_folder_is_located_as_it_is_and_resolved_only_with_safetensors_weights() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path().display().to_string();
+        // pickle weights only: a folder all the same, but no pipeline this crate can load
+        std::fs::create_dir(dir.path().join("unet")).unwrap();
+        std::fs::write(
+            dir.path().join("unet/diffusion_pytorch_model.bin"),
+            b"pickle",
+        )
+        .unwrap();
+        let hub = HubSettings::from_env();
+        assert_eq!(locate_model(&d, &hub).unwrap(), dir.path());
+        let err = resolve_prior_with(&d, &hub).unwrap_err();
+        assert!(matches!(err, CheckpointError::Prior { .. }), "{err:?}");
+        assert!(
+            err.to_string().starts_with(&format!("prior `{d}`: ")),
+            "{err}"
+        );
+        let err = locate_model("no/such/thing/here", &hub).unwrap_err();
+        assert!(matches!(err, CheckpointError::PriorSpec { .. }), "{err:?}");
+    }
 
     #[test]
     fn specs_are_classified_and_bad_ones_named() {
