@@ -180,7 +180,16 @@ fn config() -> NerfConfig {
 }
 
 fn choose(s: &Scene, dir: &Path, clean: &Path, out: &Path) -> gb_inpaint::auto::AutoReport {
-    let method = oracle_method(clean);
+    choose_with(s, dir, oracle_method(clean), clean, out)
+}
+
+fn choose_with(
+    s: &Scene,
+    dir: &Path,
+    method: MethodConfig,
+    clean: &Path,
+    out: &Path,
+) -> gb_inpaint::auto::AutoReport {
     let config = config();
     let images = gb_inpaint::oracle::load_object_free(s, clean, 1, "[oracle] clean").unwrap();
     let prompts = method.resolve_prompts(&SceneCaptions::read(dir), &PromptOverrides::default());
@@ -272,6 +281,18 @@ fn auto_weights_choose_the_oracles_guidance_and_refuse_a_pull_toward_noise() {
     assert_eq!(noise.lambda_rgb, 0.0);
     // the unguided trial is the same in both (the oracle only acts through the guidance)
     assert_eq!(truth.trials[0].ssim_bbox, noise.trials[0].ssim_bbox);
+
+    // with the default's geometry term, the guided trial holds its pseudo-holes' depth to the
+    // shared unguided prefix: it trains otherwise, and the true pull still wins
+    let clean = dir.path().join("clean");
+    let mut held = oracle_method(&clean);
+    held.geometry = MethodConfig::builtin("gb-nerf-unseen").unwrap().geometry;
+    assert!(held.holds_geometry(false));
+    let held = choose_with(&s, dir.path(), held, &clean, &dir.path().join("held"));
+    println!("held: {:?}", held.trials);
+    assert_eq!(held.trials[0].ssim_bbox, truth.trials[0].ssim_bbox);
+    assert_ne!(held.trials[1].d_psnr_bbox, truth.trials[1].d_psnr_bbox);
+    assert_eq!(held.lambda_rgb, 1.0);
 }
 
 /// Issue 45: on `alcove` the hole hides the recess, so a pseudo-hole on the flat plaster of

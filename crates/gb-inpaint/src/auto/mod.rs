@@ -59,6 +59,7 @@ pub use crate::method::{AutoSettings, Weight};
 pub use pseudo_hole::{PlacedHole, PseudoHole};
 
 use crate::error::InpaintError;
+use crate::geometry::HiddenDepth;
 use crate::method::{MethodConfig, Prompts};
 use crate::prior::SdPrior;
 use crate::trainer::{FitOptions, GuidedTrainer};
@@ -483,6 +484,15 @@ fn trial(
         setup.objects,
         setup.prefix,
     )?;
+    // the run's geometry term, held to the shared unguided prefix (the trials' unguided field)
+    let hold = match setup.prefix {
+        Some(_) if method.holds_geometry(false) => Some(HiddenDepth::from_field(
+            &nerf,
+            method.geometry.clone(),
+            method.crop_margin,
+        )?),
+        _ => None,
+    };
     let guidance = if method.needs_prior() {
         let p = prior.take().ok_or_else(|| InpaintError::PriorRequired {
             method: method.name.clone(),
@@ -492,6 +502,9 @@ fn trial(
         None
     };
     let mut t = GuidedTrainer::from_base(nerf, setup.scene, method, guidance)?;
+    if let Some(hold) = hold {
+        t.set_hidden_depth(hold);
+    }
     if let (Some(images), Some(_)) = (i.oracle, i.method.oracle.clean.as_ref()) {
         t.set_oracle(crate::oracle::OracleTargets::new(
             images.to_vec(),
@@ -512,6 +525,21 @@ fn trial(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_auto_method_is_the_default_s_but_for_its_weights() {
+        let unseen = MethodConfig::builtin("gb-nerf-unseen").unwrap();
+        let mut auto = MethodConfig::builtin("gb-nerf-auto").unwrap();
+        assert!(auto.lambda_rgb.is_auto() && auto.lambda_normal.is_auto());
+        // its geometry term too: a guided choice is held like the default
+        assert!(auto.geometry.enabled());
+        auto.name = unseen.name.clone();
+        auto.description = unseen.description.clone();
+        auto.lambda_rgb = unseen.lambda_rgb;
+        auto.lambda_normal = unseen.lambda_normal;
+        auto.auto = unseen.auto.clone();
+        assert_eq!(auto, unseen);
+    }
 
     #[test]
     fn the_grid_spans_the_auto_weights_only() {

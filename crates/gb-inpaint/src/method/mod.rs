@@ -395,12 +395,21 @@ impl MethodConfig {
         self.rgb.is_some() || self.normal.is_some()
     }
 
+    /// True when some modality is guided with a weight other than zero (`"auto"` counts: it
+    /// may choose one). A method whose weights are all zero (an auto choice of no guidance)
+    /// trains exactly as `none`.
+    pub fn guides(&self) -> bool {
+        let on = |table: bool, w: Weight| table && w != Weight::Fixed(0.0);
+        on(self.rgb.is_some(), self.lambda_rgb) || on(self.normal.is_some(), self.lambda_normal)
+    }
+
     /// True when `[geometry]` has a weight and the run has a term inside the mask for it to
-    /// hold against: guidance on a modality, or `has_references` (reference views). The
-    /// built-in `none` carries the table so that a reference added to it is held, while a
-    /// plain `none` run pays nothing.
+    /// hold against: guidance with a weight ([`Self::guides`]), or `has_references`
+    /// (reference views). The built-in `none` carries the table so that a reference added to
+    /// it is held, while a plain `none` run, or a guided method whose weights are zero, pays
+    /// nothing.
     pub fn holds_geometry(&self, has_references: bool) -> bool {
-        self.geometry.enabled() && (self.needs_prior() || has_references)
+        self.geometry.enabled() && (self.guides() || has_references)
     }
 
     /// `step` (counted out of `reference_steps`) in a run of `total_steps` steps:
@@ -460,6 +469,13 @@ mod tests {
         let default = MethodConfig::builtin(DEFAULT_METHOD).unwrap();
         assert!(default.holds_geometry(false));
         assert_eq!(default.geometry, none.geometry);
+        // a weight of zero guides nothing, so there is nothing to hold
+        let mut zero = default.clone();
+        zero.lambda_rgb = Weight::Fixed(0.0);
+        assert!(zero.holds_geometry(false));
+        zero.lambda_normal = Weight::Fixed(0.0);
+        assert!(!zero.guides() && !zero.holds_geometry(false));
+        assert!(zero.holds_geometry(true));
         // the paper's method stays as published
         assert!(!MethodConfig::builtin("gb-nerf")
             .unwrap()
