@@ -9,6 +9,7 @@
 
 mod assets;
 mod cmd;
+mod default_device;
 
 use std::io::IsTerminal;
 
@@ -121,6 +122,7 @@ fn usage_error_line(rendered: &str) -> String {
 }
 
 fn main() {
+    default_device::pin_to_command_line();
     init_logging();
     let cli = parse_cli();
     if let Err(e) = assets::install() {
