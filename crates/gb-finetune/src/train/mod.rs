@@ -15,6 +15,7 @@ pub mod batch;
 pub mod checkpoint;
 pub mod config;
 pub mod grad_clip;
+pub mod grad_sync;
 pub mod loss;
 pub mod models;
 pub mod trainer;

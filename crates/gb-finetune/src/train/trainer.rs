@@ -15,6 +15,7 @@ use gb_diffusion::lora::{collect_lora, write_peft_lora, LoraComponent, LoraExpor
 use super::batch::make_batch;
 use super::checkpoint::{self, CheckpointMeta, CheckpointParts};
 use super::grad_clip::clip_global_norm;
+use super::grad_sync::{mean_gradients, GradSync, SingleProcess};
 use super::loss::inpainting_loss;
 use super::models::{PriorModels, Trainable};
 use super::{FinetuneConfig, TrainTarget};
@@ -55,6 +56,7 @@ pub struct FinetuneTrainer {
     optimizer: ModuleOptimizer,
     device: Device,
     nan_streak: usize,
+    sync: Box<dyn GradSync + Send>,
 }
 
 fn optimizer(cfg: &FinetuneConfig) -> ModuleOptimizer {
@@ -132,10 +134,20 @@ impl FinetuneTrainer {
             losses: Vec::new(),
             device: device.clone(),
             nan_streak: 0,
+            sync: Box::new(SingleProcess),
         })
     }
 
-    /// One optimiser step: `grad_accum` micro-batches, global-norm clip, AdamW update. A
+    /// Trains as one rank of a data-parallel run: each step's gradients are replaced by their
+    /// mean over the ranks of `sync` before the clip ([`super::grad_sync`]). The default is
+    /// [`SingleProcess`].
+    pub fn with_sync(mut self, sync: Box<dyn GradSync + Send>) -> Self {
+        self.sync = sync;
+        self
+    }
+
+    /// One optimiser step: `grad_accum` micro-batches, the ranks' mean ([`Self::with_sync`]),
+    /// global-norm clip, AdamW update. A
     /// non-finite loss or gradient skips the update (logged); [`MAX_NAN_STEPS`] in a row
     /// stop the run with [`FinetuneError::Diverged`].
     pub fn train_step(&mut self, source: &dyn PairSource) -> Result<StepStats, FinetuneError> {
@@ -162,6 +174,7 @@ impl FinetuneTrainer {
         }
         let loss = loss_sum / cfg.grad_accum as f64;
         let mut grads = accum.grads();
+        mean_gradients(&self.models.trainable, &mut grads, self.sync.as_ref())?;
         let norm = clip_global_norm(&self.models.trainable, &mut grads, cfg.clip_grad_norm);
         self.step += 1;
         let skipped = !(loss.is_finite() && norm.is_finite());
