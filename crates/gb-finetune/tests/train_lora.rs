@@ -13,6 +13,7 @@ use gb_diffusion::lora::{apply_lora, LoraComponent, LoraFile};
 use gb_finetune::captions::CaptionMode;
 use gb_finetune::synthetic::SyntheticPairs;
 use gb_finetune::train::batch::make_batch;
+use gb_finetune::train::grad_sync::GradSync;
 use gb_finetune::train::loss::inpainting_loss;
 use gb_finetune::train::{FinetuneConfig, FinetuneTrainer, PriorModels, TrainTarget};
 
@@ -191,6 +192,68 @@ fn written_lora_reloads_to_identical_outputs() {
         .fold(0.0f32, f32::max);
     assert!(max_diff < 1e-5, "reloaded LoRA differs by {max_diff}");
     assert!(moved > 1e-4, "the LoRA did not change the output ({moved})");
+}
+
+/// One rank of a two-rank run, without the exchange (each rank keeps its own gradient; the
+/// exchange is `grad_sync`'s unit tests).
+struct Rank(usize);
+
+impl GradSync for Rank {
+    fn rank(&self) -> usize {
+        self.0
+    }
+    fn ranks(&self) -> usize {
+        2
+    }
+    fn mean(&self, _buffer: &mut [f32]) -> Result<(), gb_finetune::FinetuneError> {
+        Ok(())
+    }
+    fn barrier(&self) -> Result<(), gb_finetune::FinetuneError> {
+        Ok(())
+    }
+}
+
+#[test]
+fn rank_zero_alone_writes_and_a_resume_needs_as_many_ranks() {
+    let _g = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let (dev, _) = device();
+    let src = data();
+    let dir = tempfile::tempdir().unwrap();
+    let ckpt = dir.path().join("checkpoint.gbft");
+    let rank = |r: usize| {
+        FinetuneTrainer::new(
+            PriorModels::load(&prior_dir(), &dev).unwrap(),
+            config(2),
+            &dev,
+        )
+        .unwrap()
+        .with_sync(Box::new(Rank(r)))
+    };
+    let mut one = rank(1);
+    one.train_step(&src).unwrap();
+    one.save_checkpoint(&ckpt).unwrap();
+    assert!(!ckpt.exists(), "rank 1 wrote the checkpoint");
+    let mut zero = rank(0);
+    zero.train_step(&src).unwrap();
+    zero.save_checkpoint(&ckpt).unwrap();
+    assert!(ckpt.is_file());
+    let err = FinetuneTrainer::resume(PriorModels::load(&prior_dir(), &dev).unwrap(), &ckpt, &dev)
+        .err()
+        .expect("a one-process resume of a two-rank checkpoint")
+        .to_string();
+    assert!(err.starts_with(&ckpt.display().to_string()), "{err}");
+    assert!(
+        err.contains("a run of 2 rank(s), and this run has 1"),
+        "{err}"
+    );
+    let (back, _) = FinetuneTrainer::resume_with_sync(
+        PriorModels::load(&prior_dir(), &dev).unwrap(),
+        &ckpt,
+        &dev,
+        Box::new(Rank(0)),
+    )
+    .unwrap();
+    assert_eq!((back.step, back.losses.len()), (1, 1));
 }
 
 #[test]

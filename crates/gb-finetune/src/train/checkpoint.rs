@@ -42,6 +42,14 @@ pub struct CheckpointMeta {
     /// Loss of every completed step (for the training log), as `f64::to_bits`: a JSON
     /// decimal does not round-trip exactly through serde_json's default float parser.
     pub loss_bits: Vec<u64>,
+    /// The ranks of the data-parallel run that wrote it (1: one process; a checkpoint of
+    /// before the field is one process's). A resume needs as many ([`super::grad_sync`]).
+    #[serde(default = "one_rank")]
+    pub ranks: usize,
+}
+
+fn one_rank() -> usize {
+    1
 }
 
 impl CheckpointMeta {
@@ -157,6 +165,7 @@ mod tests {
                 nan_streak: 1,
                 loss_bits: vec![0.5f64.to_bits()],
                 extra: serde_json::Value::Null,
+                ranks: 3,
             },
             model: vec![1, 2, 3],
             optimizer: vec![4],

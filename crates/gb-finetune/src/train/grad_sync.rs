@@ -24,6 +24,9 @@ pub trait GradSync {
     /// Replaces every value of `buffer` by its mean over the ranks. Every rank passes a
     /// buffer of the same length, laid out the same way.
     fn mean(&self, buffer: &mut [f32]) -> Result<(), FinetuneError>;
+    /// Waits until every rank has reached this call (after rank 0 alone writes a file that
+    /// the others may read next).
+    fn barrier(&self) -> Result<(), FinetuneError>;
 }
 
 /// One process: the mean of one rank is its own gradient.
@@ -40,6 +43,10 @@ impl GradSync for SingleProcess {
     }
 
     fn mean(&self, _buffer: &mut [f32]) -> Result<(), FinetuneError> {
+        Ok(())
+    }
+
+    fn barrier(&self) -> Result<(), FinetuneError> {
         Ok(())
     }
 }
@@ -179,6 +186,9 @@ mod tests {
             for (v, o) in buffer.iter_mut().zip(other.iter()) {
                 *v = (*v + o) / 2.0;
             }
+            Ok(())
+        }
+        fn barrier(&self) -> Result<(), FinetuneError> {
             Ok(())
         }
     }

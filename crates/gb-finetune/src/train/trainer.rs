@@ -217,12 +217,20 @@ impl FinetuneTrainer {
     }
 
     /// [`Self::save_checkpoint`] with the caller's own state `extra` (read back by
-    /// [`Self::resume_with_extra`]).
+    /// [`Self::resume_with_extra`]). In a data-parallel run rank 0 alone writes, recording
+    /// the number of ranks, and every rank waits for it.
     pub fn save_checkpoint_with(
         &self,
         path: &Path,
         extra: serde_json::Value,
     ) -> Result<(), FinetuneError> {
+        if self.sync.rank() == 0 {
+            self.write_checkpoint(path, extra)?;
+        }
+        self.sync.barrier()
+    }
+
+    fn write_checkpoint(&self, path: &Path, extra: serde_json::Value) -> Result<(), FinetuneError> {
         let bad = |m: String| FinetuneError::Invalid {
             path: path.to_path_buf(),
             message: m,
@@ -247,6 +255,7 @@ impl FinetuneTrainer {
                     nan_streak: self.nan_streak,
                     extra,
                     loss_bits: self.losses.iter().map(|l| l.to_bits()).collect(),
+                    ranks: self.sync.ranks(),
                 },
                 model: model.to_vec(),
                 optimizer: optimizer.to_vec(),
@@ -273,13 +282,34 @@ impl FinetuneTrainer {
         path: &Path,
         device: &Device,
     ) -> Result<(Self, serde_json::Value), FinetuneError> {
+        Self::resume_with_sync(models, path, device, Box::new(SingleProcess))
+    }
+
+    /// [`Self::resume_with_extra`] as one rank of a data-parallel run ([`Self::with_sync`]).
+    /// A checkpoint written by another number of ranks is refused, naming both counts: the
+    /// global batch, and so the run, would differ.
+    pub fn resume_with_sync(
+        models: PriorModels,
+        path: &Path,
+        device: &Device,
+        sync: Box<dyn GradSync + Send>,
+    ) -> Result<(Self, serde_json::Value), FinetuneError> {
         let mut parts = checkpoint::load(path)?;
         let extra = std::mem::take(&mut parts.meta.extra);
         let bad = |m: String| FinetuneError::Invalid {
             path: path.to_path_buf(),
             message: m,
         };
-        let mut t = Self::new(models, parts.meta.config(path)?, device)?;
+        if parts.meta.ranks != sync.ranks() {
+            return Err(bad(format!(
+                "written by a run of {} rank(s), and this run has {}: resume with {} \
+                 (the global batch is the per-rank batch times the ranks)",
+                parts.meta.ranks,
+                sync.ranks(),
+                parts.meta.ranks
+            )));
+        }
+        let mut t = Self::new(models, parts.meta.config(path)?, device)?.with_sync(sync);
         let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(parts.model))
             .map_err(|e| bad(format!("model record: {e}")))?;
         t.models.trainable = t
