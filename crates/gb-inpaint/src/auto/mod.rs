@@ -322,13 +322,13 @@ pub fn choose_weights(
     );
     let prefix_start = Instant::now();
     let prefix_steps = ((steps as f64 * auto.prefix).round() as usize).min(steps - 1);
-    let prefix = if prefix_steps > 0 {
+    let (prefix, hold) = if prefix_steps > 0 {
         let path = dir.join(PREFIX_FILE);
         std::fs::create_dir_all(&dir).map_err(|e| InpaintError::io(&dir, e))?;
-        shared_prefix(i, &trial_scene, &objects, prefix_steps, &path)?;
-        Some(path)
+        let hold = shared_prefix(i, &trial_scene, &objects, prefix_steps, &path)?;
+        (Some(path), hold)
     } else {
-        None
+        (None, None)
     };
     let prefix_seconds = prefix_start.elapsed().as_secs_f64();
     let setup = TrialSetup {
@@ -337,6 +337,7 @@ pub fn choose_weights(
         scored: &scored,
         steps,
         prefix: prefix.as_deref(),
+        hold: hold.as_ref(),
     };
     let trials = run_trials(i, &setup, prior);
     if let Some(path) = &prefix {
@@ -402,6 +403,8 @@ struct TrialSetup<'a> {
     steps: usize,
     /// The shared unguided prefix's checkpoint, if any.
     prefix: Option<&'a Path>,
+    /// The geometry term's targets from the prefix's field, when the method has the term.
+    hold: Option<&'a HiddenDepth>,
 }
 
 /// Every trial of the grid, in grid order.
@@ -437,14 +440,16 @@ fn run_trials(
 }
 
 /// Trains the trial scene without guidance (the `none` method) for `steps` and writes the
-/// checkpoint `path` that every trial continues from.
+/// checkpoint `path` that every trial continues from. Returns the method's geometry targets
+/// from this unguided field (the pseudo-holes' depth), when it has the term: what each guided
+/// trial holds, as the run holds the real hole to its unguided pass.
 fn shared_prefix(
     i: &AutoInputs,
     scene: &Scene,
     objects: &[Option<Mask>],
     steps: usize,
     path: &Path,
-) -> Result<(), InpaintError> {
+) -> Result<Option<HiddenDepth>, InpaintError> {
     let mut config = i.config.clone();
     config.train.steps = steps;
     let none = MethodConfig::builtin("none")?;
@@ -457,7 +462,11 @@ fn shared_prefix(
     })?;
     t.nerf.save_checkpoint(path)?;
     tracing::info!(steps, "auto weights: the trials' shared unguided prefix");
-    Ok(())
+    let geometry = &i.method.geometry;
+    geometry
+        .enabled()
+        .then(|| HiddenDepth::from_field(&t.nerf, geometry.clone(), i.method.crop_margin))
+        .transpose()
 }
 
 /// One trial: trains and scores `weights` on the trial scene (from the shared prefix, when
@@ -485,14 +494,7 @@ fn trial(
         setup.prefix,
     )?;
     // the run's geometry term, held to the shared unguided prefix (the trials' unguided field)
-    let hold = match setup.prefix {
-        Some(_) if method.holds_geometry(false) => Some(HiddenDepth::from_field(
-            &nerf,
-            method.geometry.clone(),
-            method.crop_margin,
-        )?),
-        _ => None,
-    };
+    let hold = setup.hold.filter(|_| method.holds_geometry(false)).cloned();
     let guidance = if method.needs_prior() {
         let p = prior.take().ok_or_else(|| InpaintError::PriorRequired {
             method: method.name.clone(),
