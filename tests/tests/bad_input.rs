@@ -711,6 +711,21 @@ fn cases() -> Vec<(&'static str, Setup)> {
             ]);
             run(args, &["no_diode", "DIODE root folder"])
         }),
+        case(
+            "finetune --data-parallel mpi of the tiny prior's recipe",
+            |c| {
+                let args = strings(&[
+                    "finetune",
+                    "--synthetic",
+                    "--from-scratch",
+                    "--data-parallel",
+                    "mpi",
+                    "--out",
+                    path_str(&c.path("out")),
+                ]);
+                run(args, &["--data-parallel mpi", "not --from-scratch"])
+            },
+        ),
         case("--lora pointing at a missing file", |c| {
             let s = c.scene();
             let lora = c.path("no_lora.safetensors");

@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::masks::MaskConfig;
 use crate::sample::PairSource;
 use crate::train::checkpoint::{exact_floats, from_exact_floats};
+use crate::train::grad_sync::{GradSync, SingleProcess};
 use crate::train::validate::{sampling_prior, validate, ValidationReport, ValidationSettings};
 use crate::train::{FinetuneConfig, FinetuneTrainer, PriorModels, TrainTarget};
 use crate::FinetuneError;
@@ -197,6 +198,15 @@ pub fn validation_settings(cfg: &FinetuneConfig) -> ValidationSettings {
     }
 }
 
+/// The samples a run trains on, and validates on (none: no validation).
+#[derive(Clone, Copy)]
+pub struct RunData<'a> {
+    /// The training pairs.
+    pub train: &'a dyn PairSource,
+    /// The validation pairs.
+    pub val: Option<&'a dyn PairSource>,
+}
+
 /// Runs (or resumes) a fine-tuning run. `models` must be loaded on `device` (autodiff);
 /// `plain` is the same backend without autodiff, used for validation sampling.
 pub fn run_finetune(
@@ -208,12 +218,59 @@ pub fn run_finetune(
     plain: &Device,
     opts: &RunOptions,
 ) -> Result<RunSummary, FinetuneError> {
-    std::fs::create_dir_all(&opts.out).map_err(|e| FinetuneError::io(&opts.out, e))?;
+    let data = RunData { train, val };
+    run_finetune_ranked(
+        models,
+        config,
+        data,
+        device,
+        plain,
+        opts,
+        Box::new(SingleProcess),
+    )
+}
+
+/// [`run_finetune`] as one rank of a data-parallel run ([`crate::train::grad_sync`]): every
+/// rank trains on its share of each global batch (`batch x grad_accum` per rank, times the
+/// ranks), and rank 0 alone validates and writes the folder's files (the checkpoint, the
+/// logs, the export) while the others wait for it at a barrier. A resume needs as many ranks
+/// as the checkpoint's run had. Every rank returns the same summary, but only rank 0's has
+/// the validation reports.
+pub fn run_finetune_ranked(
+    models: PriorModels,
+    config: FinetuneConfig,
+    data: RunData<'_>,
+    device: &Device,
+    plain: &Device,
+    opts: &RunOptions,
+    sync: Box<dyn GradSync + Send>,
+) -> Result<RunSummary, FinetuneError> {
+    let RunData { train, val } = data;
+    let (rank, ranks) = (sync.rank(), sync.ranks());
+    let writer = rank == 0;
+    // the other ranks neither validate nor write
+    let val = val.filter(|_| writer);
+    if writer {
+        std::fs::create_dir_all(&opts.out).map_err(|e| FinetuneError::io(&opts.out, e))?;
+    }
+    if ranks > 1 {
+        tracing::info!(
+            rank,
+            ranks,
+            "data-parallel: global batch {} = {} per rank ({} x {} micro-batches) x {ranks} ranks",
+            config.batch * config.grad_accum * ranks,
+            config.batch * config.grad_accum,
+            config.batch,
+            config.grad_accum
+        );
+    }
     let ckpt = checkpoint_path(&opts.out);
     let settings = validation_settings(&config);
     let mut reports = Validations::default();
+    // every rank sees the same folder: each decides alike whether to resume
     let resuming = opts.resume && ckpt.is_file();
-    if !resuming {
+    sync.barrier()?;
+    if !resuming && writer {
         let path = opts.out.join("validation.jsonl");
         match std::fs::remove_file(&path) {
             Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
@@ -230,8 +287,10 @@ pub fn run_finetune(
         reports.0.push((0, report));
     }
     let mut trainer = if resuming {
-        let (mut t, extra) = FinetuneTrainer::resume_with_extra(models, &ckpt, device)?;
-        validation_up_to(&opts.out, t.step)?;
+        let (mut t, extra) = FinetuneTrainer::resume_with_sync(models, &ckpt, device, sync)?;
+        if writer {
+            validation_up_to(&opts.out, t.step)?;
+        }
         reports = Validations::from_checkpoint(&extra, &ckpt)?;
         // `steps` and the checkpoint / validation cadence may change on resume (to extend a
         // run); any other difference would break the exact continuation, so the
@@ -253,7 +312,7 @@ pub fn run_finetune(
         tracing::info!(step = t.step, "resumed from {}", ckpt.display());
         t
     } else {
-        FinetuneTrainer::new(models, config, device)?
+        FinetuneTrainer::new(models, config, device)?.with_sync(sync)
     };
     let cfg = trainer.config.clone();
     let toml_text = toml::to_string(&cfg).map_err(|e| FinetuneError::Config {
@@ -261,10 +320,12 @@ pub fn run_finetune(
         message: e.to_string(),
     })?;
     let cfg_path = opts.out.join("config.toml");
-    gb_core::write_atomic(&cfg_path, toml_text.as_bytes())
-        .map_err(|e| FinetuneError::io(&cfg_path, e))?;
+    if writer {
+        gb_core::write_atomic(&cfg_path, toml_text.as_bytes())
+            .map_err(|e| FinetuneError::io(&cfg_path, e))?;
+    }
 
-    let bar = if opts.progress {
+    let bar = if opts.progress && writer {
         let b = gb_core::progress::bar(cfg.steps as u64);
         b.set_style(
             ProgressStyle::with_template("{bar:30} {pos}/{len} {per_sec} eta {eta} {msg}")
@@ -295,29 +356,35 @@ pub fn run_finetune(
         }
         if last || (cfg.checkpoint_every > 0 && s.step % cfg.checkpoint_every == 0) {
             trainer.save_checkpoint_with(&ckpt, reports.to_checkpoint()?)?;
-            write_log(&opts.out, &trainer.losses)?;
+            if writer {
+                write_log(&opts.out, &trainer.losses)?;
+            }
         }
     }
     bar.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
     let done = trainer.step - first;
     let export = match cfg.target {
-        TrainTarget::Lora => {
-            let path = opts.out.join(gb_diffusion::lora::LORA_FILE_NAME);
-            let n = trainer.export_lora(&path)?;
-            tracing::info!(adapters = n, "LoRA written to {}", path.display());
-            path
-        }
-        TrainTarget::Full => {
-            let path = opts.out.join("prior");
-            let vae_json = opts
-                .vae_config_json
-                .clone()
-                .unwrap_or_else(|| serde_json::json!({"_class_name": "AutoencoderKL"}));
-            trainer.models.save_folder(&path, &vae_json)?;
-            path
-        }
+        TrainTarget::Lora => opts.out.join(gb_diffusion::lora::LORA_FILE_NAME),
+        TrainTarget::Full => opts.out.join("prior"),
     };
+    if writer {
+        match cfg.target {
+            TrainTarget::Lora => {
+                let n = trainer.export_lora(&export)?;
+                tracing::info!(adapters = n, "LoRA written to {}", export.display());
+            }
+            TrainTarget::Full => {
+                let vae_json = opts
+                    .vae_config_json
+                    .clone()
+                    .unwrap_or_else(|| serde_json::json!({"_class_name": "AutoencoderKL"}));
+                trainer.models.save_folder(&export, &vae_json)?;
+            }
+        }
+    }
+    // the others return once the export is on disk
+    trainer.sync().barrier()?;
     let n = trainer.losses.len();
     let k = (n / 10).max(1);
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;

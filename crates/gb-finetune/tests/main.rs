@@ -8,6 +8,7 @@ mod data_captions;
 mod data_crop;
 mod data_diode;
 mod data_masks;
+mod data_parallel;
 mod data_synthetic;
 mod recipe_resume;
 mod tiny_prior_benefit;

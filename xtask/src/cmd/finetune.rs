@@ -18,10 +18,11 @@ use gb_core::BackendKind;
 use gb_diffusion::pipeline::SdComponents;
 use gb_finetune::captions::CaptionMode;
 use gb_finetune::diode::{DiodeDataset, DiodeSplit};
-use gb_finetune::run::{run_finetune, RunOptions};
+use gb_finetune::run::{run_finetune_ranked, RunData, RunOptions};
 use gb_finetune::sample::PairSource;
 use gb_finetune::synthetic::SyntheticPairs;
 use gb_finetune::tiny_prior::{run_recipe, SyntheticData};
+use gb_finetune::train::grad_sync::{launched_ranks, GradSync, SingleProcess};
 use gb_finetune::train::{FinetuneConfig, PriorModels};
 use gb_finetune::validate_only::validate_prior;
 
@@ -120,6 +121,69 @@ pub struct Args {
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Data-parallel LoRA fine-tuning: `mpi` (each of `mpirun -n N`'s ranks trains on its
+    /// share of every global batch, `batch x grad_accum x N`; needs the `mpi` feature). The
+    /// default is `mpi` when an MPI launcher started this process among several ranks.
+    #[arg(long, value_enum)]
+    pub data_parallel: Option<DataParallel>,
+}
+
+/// How the ranks of a fine-tuning run share the work.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DataParallel {
+    /// One process.
+    None,
+    /// Ranks launched by `mpirun`, `srun` or an MPI operator, exchanging gradients over MPI.
+    Mpi,
+}
+
+/// The gradient exchange the command line asks for ([`Args::data_parallel`]), with one clear
+/// line for a launch it cannot serve.
+fn grad_sync(args: &Args) -> anyhow::Result<Box<dyn GradSync + Send>> {
+    let launched = launched_ranks(|k| std::env::var(k).ok()).filter(|&n| n > 1);
+    let mpi = match args.data_parallel {
+        Some(DataParallel::Mpi) => true,
+        Some(DataParallel::None) => {
+            if let Some(n) = launched {
+                bail!(
+                    "--data-parallel none, but an MPI launcher started {n} ranks: each would \
+                     train alone into {}; use --data-parallel mpi, or start one process",
+                    args.out.display()
+                );
+            }
+            false
+        }
+        None => launched.is_some(),
+    };
+    if !mpi {
+        return Ok(Box::new(SingleProcess));
+    }
+    if args.from_scratch || args.validate_only {
+        bail!(
+            "--data-parallel mpi: only LoRA fine-tuning (--diode, --synthetic or --pairs, \
+             with --base) runs data-parallel, not --from-scratch or --validate-only"
+        );
+    }
+    mpi_sync(launched)
+}
+
+#[cfg(feature = "mpi")]
+fn mpi_sync(_launched: Option<usize>) -> anyhow::Result<Box<dyn GradSync + Send>> {
+    let sync = gb_finetune::train::mpi_sync::MpiSync::init()?;
+    tracing::info!(rank = sync.rank(), ranks = sync.ranks(), "MPI initialised");
+    Ok(Box::new(sync))
+}
+
+#[cfg(not(feature = "mpi"))]
+fn mpi_sync(launched: Option<usize>) -> anyhow::Result<Box<dyn GradSync + Send>> {
+    let how = launched
+        .map(|n| format!(" (an MPI launcher started {n} ranks)"))
+        .unwrap_or_default();
+    bail!(
+        "--data-parallel mpi{how}: this gb-nerf was built without the `mpi` feature; rebuild \
+         it with `cargo build --release -p xtask --features mpi` (needs Debian's \
+         libopenmpi-dev, openmpi-bin and libclang-dev)"
+    )
 }
 
 fn config_of(args: &Args, native: usize) -> anyhow::Result<FinetuneConfig> {
@@ -167,6 +231,7 @@ fn config_of(args: &Args, native: usize) -> anyhow::Result<FinetuneConfig> {
 
 /// Runs the command.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let sync = grad_sync(&args)?;
     let device = args.device.autodiff_device();
     let plain = args.device.device();
     if args.from_scratch {
@@ -216,11 +281,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let models = PriorModels::load(&base_dir, &device)?;
     let native = models.unet_config.native_resolution(models.vae_factor);
     let cfg = config_of(&args, native)?;
-    let summary = run_finetune(
+    let rank = sync.rank();
+    let data = RunData {
+        train: train.as_ref(),
+        val: val.as_deref(),
+    };
+    let summary = run_finetune_ranked(
         models,
         cfg,
-        train.as_ref(),
-        val.as_deref(),
+        data,
         &device,
         &plain,
         &RunOptions {
@@ -229,8 +298,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             progress: !args.quiet,
             vae_config_json: None,
         },
+        sync,
     )?;
-    println!("{}", serde_json::to_string_pretty(&summary)?);
+    if rank == 0 {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    }
     Ok(())
 }
 
@@ -263,4 +335,20 @@ fn validate_only(
 /// ([`SyntheticData::builtin`]).
 pub fn default_synthetic() -> anyhow::Result<(SyntheticPairs, SyntheticPairs)> {
     Ok(SyntheticData::builtin().generate()?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[cfg(not(feature = "mpi"))]
+    #[test]
+    fn an_mpi_launch_of_a_build_without_the_feature_says_how_to_rebuild() {
+        let e = mpi_sync(Some(2)).err().unwrap().to_string();
+        assert!(
+            e.starts_with("--data-parallel mpi (an MPI launcher started 2 ranks)"),
+            "{e}"
+        );
+        assert!(e.contains("--features mpi") && !e.contains('\n'), "{e}");
+    }
 }

@@ -51,6 +51,20 @@ impl GradSync for SingleProcess {
     }
 }
 
+/// The variables that MPI launchers set to the number of ranks: Open MPI's `mpirun`, and the
+/// PMI of MPICH's `mpiexec` and of Slurm's `srun --mpi=pmi2`.
+pub const MPI_SIZE_VARIABLES: [&str; 2] = ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"];
+
+/// How many ranks an MPI launcher started this process among, read from its environment
+/// ([`MPI_SIZE_VARIABLES`]); `None` outside such a launch. The command line uses it to train
+/// data-parallel when launched by `mpirun -n N` (N > 1), and to refuse a build without the
+/// `mpi` feature in that case rather than train N identical copies.
+pub fn launched_ranks(var: impl Fn(&str) -> Option<String>) -> Option<usize> {
+    MPI_SIZE_VARIABLES
+        .iter()
+        .find_map(|name| var(name).and_then(|v| v.trim().parse::<usize>().ok()))
+}
+
 /// Where one parameter's gradient lies in the flat buffer.
 #[derive(Debug, Clone)]
 struct Slot {
@@ -248,6 +262,25 @@ mod tests {
             other: RefCell::new(vec![0.0; 3]),
         };
         assert!(mean_gradients(&layer, &mut mine, &short).is_err());
+    }
+
+    #[test]
+    fn an_mpi_launch_is_read_from_its_environment() {
+        let env = |pairs: &'static [(&'static str, &'static str)]| {
+            move |name: &str| {
+                pairs
+                    .iter()
+                    .find(|(k, _)| *k == name)
+                    .map(|(_, v)| v.to_string())
+            }
+        };
+        assert_eq!(
+            launched_ranks(env(&[("OMPI_COMM_WORLD_SIZE", "4")])),
+            Some(4)
+        );
+        assert_eq!(launched_ranks(env(&[("PMI_SIZE", " 2\n")])), Some(2));
+        assert_eq!(launched_ranks(env(&[("SLURM_NTASKS", "2")])), None);
+        assert_eq!(launched_ranks(env(&[("PMI_SIZE", "two")])), None);
     }
 
     #[test]

@@ -146,6 +146,11 @@ impl FinetuneTrainer {
         self
     }
 
+    /// The ranks this trainer trains among ([`Self::with_sync`]).
+    pub fn sync(&self) -> &dyn GradSync {
+        self.sync.as_ref()
+    }
+
     /// One optimiser step: `grad_accum` micro-batches, the ranks' mean ([`Self::with_sync`]),
     /// global-norm clip, AdamW update. A
     /// non-finite loss or gradient skips the update (logged); [`MAX_NAN_STEPS`] in a row
@@ -158,8 +163,12 @@ impl FinetuneTrainer {
         let train_text = cfg.train_text_encoder;
         let mut accum = GradientsAccumulator::<Trainable>::new();
         let mut loss_sum = 0.0;
+        let (rank, ranks) = (self.sync.rank(), self.sync.ranks());
         for micro in 0..cfg.grad_accum {
-            let batch = make_batch(source, cfg, self.step, micro, channels, latent, schedule)?;
+            // rank r draws the global step's micro-batches r, r + ranks, r + 2 ranks, ...: the
+            // ranks together draw what one process with `grad_accum x ranks` draws
+            let global = micro * ranks + rank;
+            let batch = make_batch(source, cfg, self.step, global, channels, latent, schedule)?;
             let loss = inpainting_loss(
                 &self.models,
                 &self.models.trainable,
@@ -172,9 +181,15 @@ impl FinetuneTrainer {
             let grads = GradientsParams::from_grads(loss.backward(), &self.models.trainable);
             accum.accumulate(&self.models.trainable, grads);
         }
-        let loss = loss_sum / cfg.grad_accum as f64;
+        let mut loss = loss_sum / cfg.grad_accum as f64;
         let mut grads = accum.grads();
         mean_gradients(&self.models.trainable, &mut grads, self.sync.as_ref())?;
+        if ranks > 1 {
+            // every rank logs, and decides on a non-finite step from, the global batch's loss
+            let mut mean = [loss as f32];
+            self.sync.mean(&mut mean)?;
+            loss = f64::from(mean[0]);
+        }
         let norm = clip_global_norm(&self.models.trainable, &mut grads, cfg.clip_grad_norm);
         self.step += 1;
         let skipped = !(loss.is_finite() && norm.is_finite());

@@ -1,0 +1,90 @@
+//! [`MpiSync`]: the gradient exchange of [`super::grad_sync`] over MPI (the `mpi` feature,
+//! off by default; it needs Debian's `libopenmpi-dev openmpi-bin libclang-dev`).
+//!
+//! The mean is a reduction to rank 0 followed by a broadcast from it, not an `MPI_Allreduce`:
+//! MPI does not promise that every rank of an all-reduce gets the same floats, and the ranks
+//! must take bit-identical steps, or their LoRA weights drift apart.
+//!
+//! A rank that dies ends the others: MPI's default error handler on the world communicator
+//! aborts the job, and `mpirun` and `srun` end the remaining ranks when one exits early.
+
+use mpi::collective::SystemOperation;
+use mpi::environment::Universe;
+use mpi::traits::{Communicator, CommunicatorCollectives, Root};
+use mpi::Threading;
+
+use super::grad_sync::GradSync;
+use crate::FinetuneError;
+
+/// One rank of a data-parallel run launched by `mpirun`, `srun` or an MPI operator.
+pub struct MpiSync {
+    universe: Universe,
+    rank: usize,
+    ranks: usize,
+}
+
+// SAFETY: MPI is initialised with `Threading::Serialized`, under which any thread may call
+// MPI as long as no two do at once. `MpiSync` is not `Sync`, and each of its calls takes
+// `&self` on the one thread that holds it, so moving it to another thread keeps the calls
+// serialised.
+unsafe impl Send for MpiSync {}
+
+impl MpiSync {
+    /// Initialises MPI for this process (once per process; dropping the `MpiSync` finalises
+    /// it). An error when MPI was already initialised, or cannot give serialised threading.
+    pub fn init() -> Result<Self, FinetuneError> {
+        let bad = |message: String| FinetuneError::Config {
+            field: "--data-parallel".into(),
+            message,
+        };
+        let (universe, threading) = mpi::initialize_with_threading(Threading::Serialized)
+            .ok_or_else(|| bad("MPI was already initialised in this process".into()))?;
+        if threading < Threading::Serialized {
+            return Err(bad(format!(
+                "the MPI library offers threading level {threading:?}; serialised is needed"
+            )));
+        }
+        let world = universe.world();
+        let (rank, ranks) = (world.rank() as usize, world.size() as usize);
+        Ok(Self {
+            universe,
+            rank,
+            ranks,
+        })
+    }
+}
+
+impl GradSync for MpiSync {
+    fn rank(&self) -> usize {
+        self.rank
+    }
+
+    fn ranks(&self) -> usize {
+        self.ranks
+    }
+
+    fn mean(&self, buffer: &mut [f32]) -> Result<(), FinetuneError> {
+        if self.ranks <= 1 {
+            return Ok(());
+        }
+        let world = self.universe.world();
+        let root = world.process_at_rank(0);
+        if self.rank == 0 {
+            let mine = buffer.to_vec();
+            root.reduce_into_root(&mine[..], buffer, SystemOperation::sum());
+            let n = self.ranks as f32;
+            for v in buffer.iter_mut() {
+                *v /= n;
+            }
+        } else {
+            root.reduce_into(&buffer[..], SystemOperation::sum());
+        }
+        root.broadcast_into(buffer);
+        Ok(())
+    }
+
+    fn barrier(&self) -> Result<(), FinetuneError> {
+        self.universe.world().barrier();
+        Ok(())
+    }
+}
