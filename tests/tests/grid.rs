@@ -2,7 +2,9 @@
 //! its Slurm and Kubernetes job files emitted, each cell is run by its index (one through
 //! the CLI, one through the library), and the merged tables equal the single-process
 //! `cargo xtask ablate` of the same grid, timings aside. The Kubernetes manifest parses
-//! into the Kubernetes API types.
+//! into the Kubernetes API types. The jobs of a data-parallel fine-tuning run
+//! (`finetune --emit slurm,kubernetes --ranks N`): the MPIJob parses into typed structs of
+//! the MPI Operator's `kubeflow.org/v2beta1` schema.
 
 use std::path::Path;
 
@@ -130,4 +132,175 @@ fn the_kubernetes_job_parses_into_the_api_types() {
     let volume = &pod.volumes.as_ref().unwrap()[0];
     assert_eq!(volume.name, mount.name);
     assert!(volume.persistent_volume_claim.is_some());
+}
+
+/// The MPI Operator's `MPIJob` (kubeflow.org/v2beta1), the fields the emitted manifest
+/// uses; an unknown field is an error, so a misspelt one fails.
+mod mpijob {
+    use k8s_openapi::api::core::v1::PodTemplateSpec;
+    use k8s_openapi::apimachinery::pkg::apis::meta::v1::ObjectMeta;
+    use serde::Deserialize;
+
+    #[derive(Deserialize)]
+    #[serde(rename_all = "camelCase", deny_unknown_fields)]
+    pub struct MpiJob {
+        pub api_version: String,
+        pub kind: String,
+        pub metadata: ObjectMeta,
+        pub spec: MpiJobSpec,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(rename_all = "camelCase", deny_unknown_fields)]
+    pub struct MpiJobSpec {
+        pub slots_per_worker: i32,
+        pub run_policy: RunPolicy,
+        pub mpi_implementation: String,
+        pub mpi_replica_specs: ReplicaSpecs,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(rename_all = "camelCase", deny_unknown_fields)]
+    pub struct RunPolicy {
+        pub clean_pod_policy: String,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct ReplicaSpecs {
+        #[serde(rename = "Launcher")]
+        pub launcher: ReplicaSpec,
+        #[serde(rename = "Worker")]
+        pub worker: ReplicaSpec,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct ReplicaSpec {
+        pub replicas: i32,
+        pub template: PodTemplateSpec,
+    }
+}
+
+#[test]
+fn the_finetune_jobs_run_the_command_line_over_mpi() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("lora run");
+    let args = [
+        "finetune",
+        "--synthetic",
+        "--base",
+        "tiny",
+        "--steps",
+        "3",
+        "--out",
+        s(&out),
+        "--emit",
+        "slurm,kubernetes",
+        "--ranks",
+        "2",
+        "--image",
+        "registry.example/gb-nerf:mpi",
+        "--cpus",
+        "3",
+    ];
+    let o = xtask(&args);
+    assert_success(&o, "finetune --emit");
+    // nothing trained
+    assert!(!out.join("config.toml").exists());
+    let text = std::fs::read_to_string(out.join("finetune-mpijob.yaml")).unwrap();
+    let job: mpijob::MpiJob = serde_norway::from_str(&text).unwrap();
+    assert_eq!(
+        (job.api_version.as_str(), job.kind.as_str()),
+        ("kubeflow.org/v2beta1", "MPIJob")
+    );
+    assert_eq!(
+        job.metadata.name.as_deref(),
+        Some("gb-nerf-finetune-lora-run")
+    );
+    let spec = job.spec;
+    assert_eq!(spec.mpi_implementation, "OpenMPI");
+    assert_eq!(
+        (
+            spec.slots_per_worker,
+            spec.run_policy.clean_pod_policy.as_str()
+        ),
+        (1, "Running")
+    );
+    let specs = spec.mpi_replica_specs;
+    assert_eq!((specs.launcher.replicas, specs.worker.replicas), (1, 2));
+    let launcher = &specs.launcher.template.spec.unwrap().containers[0];
+    assert_eq!(
+        launcher.image.as_deref(),
+        Some("registry.example/gb-nerf:mpi")
+    );
+    let command = launcher.command.clone().unwrap();
+    let expected: Vec<String> = [
+        "mpirun",
+        "-n",
+        "2",
+        "-x",
+        "RAYON_NUM_THREADS",
+        "gb-nerf",
+        "finetune",
+        "--synthetic",
+        "--base",
+        "tiny",
+        "--steps",
+        "3",
+        "--out",
+        s(&out),
+        "--data-parallel",
+        "mpi",
+    ]
+    .iter()
+    .map(|a| a.to_string())
+    .collect();
+    assert_eq!(command, expected);
+    let worker = specs.worker.template.spec.unwrap();
+    let limits = worker.containers[0]
+        .resources
+        .clone()
+        .unwrap()
+        .limits
+        .unwrap();
+    assert_eq!(limits["cpu"].0, "3");
+    assert_eq!(
+        worker.volumes.unwrap()[0]
+            .persistent_volume_claim
+            .as_ref()
+            .unwrap()
+            .claim_name,
+        "gb-nerf-finetune"
+    );
+    let script = std::fs::read_to_string(out.join("finetune-slurm.sh")).unwrap();
+    assert!(script.contains("#SBATCH --ntasks=2\n"), "{script}");
+    assert!(script.contains("#SBATCH --cpus-per-task=3\n"), "{script}");
+    assert!(
+        script.contains("finetune --synthetic --base tiny --steps 3 --out "),
+        "{script}"
+    );
+    assert!(
+        script.trim_end().ends_with("run' --data-parallel mpi"),
+        "{script}"
+    );
+    // one clear line for a job of one rank
+    let o = xtask(&[
+        "finetune",
+        "--synthetic",
+        "--base",
+        "tiny",
+        "--out",
+        s(&out),
+        "--emit",
+        "slurm",
+        "--ranks",
+        "1",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("--ranks 1: a data-parallel job needs at least 2 ranks"),
+        "{err}"
+    );
 }

@@ -5,10 +5,13 @@
 //! [`merge`] writes the tables from the finished cells and lists the missing ones.
 //! [`emit`] writes a Slurm array script and a Kubernetes Indexed Job that run cell
 //! `$SLURM_ARRAY_TASK_ID` / `$JOB_COMPLETION_INDEX`. The single-process `cargo xtask ablate`
-//! is the same grid run in a loop. There is no scheduler of our own.
+//! is the same grid run in a loop. There is no scheduler of our own. [`finetune_job`] writes
+//! the jobs of a data-parallel fine-tuning run (a Slurm job of N MPI tasks, a Kubeflow
+//! `MPIJob`).
 
 pub mod ablate;
 pub mod emit;
+pub mod finetune_job;
 mod merge;
 mod plan;
 

@@ -25,6 +25,8 @@ use gb_finetune::tiny_prior::{run_recipe, SyntheticData};
 use gb_finetune::train::grad_sync::{launched_ranks, GradSync, SingleProcess};
 use gb_finetune::train::{FinetuneConfig, PriorModels};
 use gb_finetune::validate_only::validate_prior;
+use gb_grid::emit::{EmitOptions, Engine};
+use gb_grid::finetune_job::{job_args, write_finetune_jobs, FinetuneJob};
 
 /// Arguments of `cargo xtask finetune`.
 #[derive(clap::Args, Debug)]
@@ -126,6 +128,56 @@ pub struct Args {
     /// default is `mpi` when an MPI launcher started this process among several ranks.
     #[arg(long, value_enum)]
     pub data_parallel: Option<DataParallel>,
+    /// Only write the job files of a data-parallel run of this command line into OUT, and
+    /// exit: slurm (`finetune-slurm.sh`), kubernetes (a Kubeflow `MPIJob`,
+    /// `finetune-mpijob.yaml`); comma-separated, with --ranks.
+    #[arg(long, value_delimiter = ',', requires = "ranks")]
+    pub emit: Option<Vec<Engine>>,
+    /// Ranks (MPI processes) of the emitted jobs, at least 2.
+    #[arg(long, requires = "emit")]
+    pub ranks: Option<usize>,
+    /// Container image of the MPIJob.
+    #[arg(long, default_value = "gb-nerf:latest")]
+    pub image: String,
+    /// CPU cores per rank in the job files.
+    #[arg(long, default_value_t = 4)]
+    pub cpus: usize,
+    /// GPUs per rank in the job files.
+    #[arg(long, default_value_t = 0)]
+    pub gpus: usize,
+}
+
+/// `--emit`: the job files of a data-parallel run of this command line
+/// ([`gb_grid::finetune_job`]).
+fn emit_jobs(args: &Args, engines: &[Engine]) -> anyhow::Result<()> {
+    let ranks = args.ranks.unwrap_or(0);
+    if ranks < 2 {
+        bail!("--ranks {ranks}: a data-parallel job needs at least 2 ranks");
+    }
+    if args.from_scratch || args.validate_only {
+        bail!("--emit: only LoRA fine-tuning runs data-parallel, not --from-scratch or --validate-only");
+    }
+    let argv: Vec<String> = std::env::args()
+        .skip_while(|a| a != "finetune")
+        .skip(1)
+        .collect();
+    let workdir = std::env::current_dir().context("reading the working folder")?;
+    let job = FinetuneJob {
+        args: job_args(&argv),
+        ranks,
+        workdir: workdir.clone(),
+        out: workdir.join(&args.out),
+    };
+    let opts = EmitOptions {
+        image: args.image.clone(),
+        cpus: args.cpus,
+        gpus: args.gpus,
+        ..EmitOptions::default()
+    };
+    for path in write_finetune_jobs(&job, engines, &opts)? {
+        println!("wrote {}", path.display());
+    }
+    Ok(())
 }
 
 /// How the ranks of a fine-tuning run share the work.
@@ -231,6 +283,9 @@ fn config_of(args: &Args, native: usize) -> anyhow::Result<FinetuneConfig> {
 
 /// Runs the command.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(engines) = &args.emit {
+        return emit_jobs(&args, engines);
+    }
     let sync = grad_sync(&args)?;
     let device = args.device.autodiff_device();
     let plain = args.device.device();
