@@ -22,6 +22,7 @@ mod grid;
 mod grid_slurm;
 mod inpaint_methods;
 mod installed;
+mod mpi_launch;
 mod parity_text;
 mod reference;
 mod report_browser;

@@ -392,11 +392,10 @@ pub fn default_synthetic() -> anyhow::Result<(SyntheticPairs, SyntheticPairs)> {
     Ok(SyntheticData::builtin().generate()?)
 }
 
-#[cfg(test)]
+#[cfg(all(test, not(feature = "mpi")))]
 mod tests {
     use super::*;
 
-    #[cfg(not(feature = "mpi"))]
     #[test]
     fn an_mpi_launch_of_a_build_without_the_feature_says_how_to_rebuild() {
         let e = mpi_sync(Some(2)).err().unwrap().to_string();
