@@ -23,6 +23,12 @@ The rules are fixed before the runs are read (the issue's wording):
 
     python3 tools/diag/auto_choice.py --out bench/results/auto-holes-tuning.json REPORT.json...
 
+Several reports of one scene and seed make one cell: each method's row comes from the last
+report given that has it (a re-run of `none` and `gb-nerf-auto` after a change, given after
+the first report, keeps the first report's guided row). `--previous TUNING.json` supplies
+the guided run's wall time of a cell whose run folder is gone (an earlier judgement's
+`guided_run_seconds`).
+
 Standard library only.
 """
 
@@ -53,7 +59,8 @@ def run_metrics(report_path, runs, method):
     return None
 
 
-def cell(path):
+def read_report(path):
+    """(scene, seed, rows by method, runs folder) of one report."""
     with open(path) as f:
         report = json.load(f)
     scene = report["scene"].split()[0]
@@ -61,10 +68,26 @@ def cell(path):
         sys.exit(f"{path}: one seed a report expected")
     seed = report["scene_seeds"][0]
     rows = {r["method"]: r for r in report["baselines"]["rows"]}
+    return scene, seed, rows, report["per_seed"][0]["runs"]
+
+
+def cell(paths, previous):
+    """One scene and seed from its reports (later reports' rows win), judged."""
+    rows, source = {}, {}
+    for p in paths:
+        scene, seed, r, runs = read_report(p)
+        for m, row in r.items():
+            if m in rows and m == NONE:
+                same = all(abs(rows[m][k] - row[k]) < 1e-9 for k, _ in BAR)
+                if not same:
+                    print(f"note: {scene} {seed}: `none` differs between the reports", file=sys.stderr)
+            rows[m] = row
+            source[m] = (p, runs)
+    path = source.get(AUTO, (paths[-1], None))[0]
     for m in (NONE, AUTO):
         if m not in rows:
             sys.exit(f"{path}: no {m} row")
-    runs = report["per_seed"][0]["runs"]
+    runs = source[AUTO][1]
     bar = {m: {k: rows[m][k] for k, _ in BAR} for m in rows}
     auto_metrics = run_metrics(path, runs, AUTO)
     if auto_metrics is None or not auto_metrics.get("auto"):
@@ -110,12 +133,18 @@ def cell(path):
         winner = GUIDED if guided_wins else NONE
         out["right_choice"] = "guidance" if guided_wins else "none"
         out["auto_right"] = better_count(bar[winner], bar[AUTO]) < 2
-        g = run_metrics(path, runs, GUIDED)
+        g = run_metrics(source[GUIDED][0], source[GUIDED][1], GUIDED)
+        guided_seconds = None
         if g is not None:
             guided_seconds = g["train_seconds_this_run"] + (g.get("unguided_seconds") or 0.0)
-            out["guided_run_seconds"] = guided_seconds
             out["guided_unguided_pass_seconds"] = g.get("unguided_seconds")
+        elif (scene, seed) in previous:
+            guided_seconds = previous[(scene, seed)]
+            out["guided_run_seconds_from"] = "--previous"
+        if guided_seconds:
+            out["guided_run_seconds"] = guided_seconds
             out["trials_over_guided_run"] = a["seconds"] / guided_seconds
+    out["reports"] = list(paths)
     return out
 
 
@@ -123,13 +152,21 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("reports", nargs="+")
     ap.add_argument("--out", required=True)
+    ap.add_argument("--previous", help="an earlier judgement, for guided runs' wall times")
     args = ap.parse_args()
-    cells = sorted((cell(p) for p in args.reports), key=lambda c: (c["scene"], c["seed"]))
-    seen = set()
-    for c in cells:
-        if (c["scene"], c["seed"]) in seen:
-            sys.exit(f"{c['scene']} seed {c['seed']} is in two reports")
-        seen.add((c["scene"], c["seed"]))
+    previous = {}
+    if args.previous:
+        with open(args.previous) as f:
+            for c in json.load(f)["cells"]:
+                if c.get("guided_run_seconds"):
+                    previous[(c["scene"], c["seed"])] = c["guided_run_seconds"]
+    groups = {}
+    for p in args.reports:
+        scene, seed, _, _ = read_report(p)
+        groups.setdefault((scene, seed), []).append(p)
+    cells = sorted(
+        (cell(ps, previous) for ps in groups.values()), key=lambda c: (c["scene"], c["seed"])
+    )
     scenes = {}
     for c in cells:
         scenes.setdefault(c["scene"], []).append(c)

@@ -6,7 +6,8 @@
 # bench/results/auto-holes-seed-SEED/, runs in out/q45/ (finished runs are reused). GB_NERF
 # names the binary to run (default: cargo xtask), so that a long run is not rebuilt from a
 # tree being edited.
-# Usage: [GUIDED=1] [GB_NERF=/path/to/gb-nerf] tools/diag/auto_tuning.sh SEED [SCENE ...]
+# OUT names another folder for the reports (a re-run beside the first).
+# Usage: [GUIDED=1] [OUT=DIR] [GB_NERF=/path/to/gb-nerf] tools/diag/auto_tuning.sh SEED [SCENE ...]
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 # the build the README commands and CI share (.ci/run)
@@ -20,7 +21,7 @@ scenes=("$@")
 if [ -n "${GB_NERF:-}" ]; then run=("$GB_NERF"); else run=(cargo xtask); fi
 methods=none,gb-nerf-auto
 [ "${GUIDED:-0}" = 1 ] && methods=none,gb-nerf-auto,gb-nerf-unseen
-out="bench/results/auto-holes-seed-$seed"
+out="${OUT:-bench/results/auto-holes-seed-$seed}"
 mkdir -p "$out"
 for scene in "${scenes[@]}"; do
     "${run[@]}" bench quality --scenes "$scene" --seeds "$seed" --methods "$methods" \
