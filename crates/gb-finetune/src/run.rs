@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::masks::MaskConfig;
 use crate::sample::PairSource;
 use crate::train::checkpoint::{exact_floats, from_exact_floats};
-use crate::train::grad_sync::{GradSync, SingleProcess};
+use crate::train::grad_sync::{trainable_values, GradSync, SingleProcess};
 use crate::train::validate::{sampling_prior, validate, ValidationReport, ValidationSettings};
 use crate::train::{FinetuneConfig, FinetuneTrainer, PriorModels, TrainTarget};
 use crate::FinetuneError;
@@ -58,12 +58,29 @@ pub struct RunSummary {
     pub train_seconds: f64,
     /// Steps per second in this process.
     pub steps_per_second: f64,
+    /// Ranks of the run (1: one process).
+    #[serde(default = "one")]
+    pub ranks: usize,
+    /// Seconds of `train_seconds` spent exchanging gradients with the other ranks.
+    #[serde(default)]
+    pub exchange_seconds: f64,
+    /// Bytes of gradient each rank sends per step (and receives back averaged), against
+    /// `lora_bytes`, the adapters' size.
+    #[serde(default)]
+    pub exchanged_bytes_per_step: usize,
+    /// Bytes of the values that train (`f32`): the adapters of a LoRA run.
+    #[serde(default)]
+    pub trainable_bytes: usize,
     /// Validation of the base (step 0) and of the final model.
     pub validation_base: Option<ValidationReport>,
     /// See `validation_base`.
     pub validation_final: Option<ValidationReport>,
     /// The exported LoRA file or prior folder.
     pub export: PathBuf,
+}
+
+fn one() -> usize {
+    1
 }
 
 /// The checkpoint file of a run folder.
@@ -338,8 +355,11 @@ pub fn run_finetune_ranked(
     };
     let start = std::time::Instant::now();
     let first = trainer.step;
+    let (mut exchange_seconds, mut exchanged_values) = (0.0, 0);
     while trainer.step < cfg.steps {
         let s = trainer.train_step(train)?;
+        exchange_seconds += s.exchange_seconds;
+        exchanged_values = s.exchanged_values;
         bar.set_position(s.step as u64);
         bar.set_message(format!("loss {:.4} |g| {:.3}", s.loss, s.grad_norm));
         let last = s.step == cfg.steps;
@@ -394,6 +414,10 @@ pub fn run_finetune_ranked(
         loss_end: mean(&trainer.losses[n.saturating_sub(k)..]),
         train_seconds: secs,
         steps_per_second: if secs > 0.0 { done as f64 / secs } else { 0.0 },
+        ranks,
+        exchange_seconds,
+        exchanged_bytes_per_step: exchanged_values * std::mem::size_of::<f32>(),
+        trainable_bytes: trainable_values(&trainer.models.trainable) * std::mem::size_of::<f32>(),
         validation_base: reports.of(0),
         validation_final: reports.of(trainer.step).filter(|_| trainer.step > 0),
         export,

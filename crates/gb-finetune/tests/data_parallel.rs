@@ -10,7 +10,7 @@ use std::sync::{Arc, Barrier, Mutex};
 use gb_core::BackendKind;
 use gb_finetune::captions::CaptionMode;
 use gb_finetune::synthetic::SyntheticPairs;
-use gb_finetune::train::grad_sync::GradSync;
+use gb_finetune::train::grad_sync::{trainable_values, GradSync};
 use gb_finetune::train::models::parameter_values;
 use gb_finetune::train::{FinetuneConfig, FinetuneTrainer, PriorModels, TrainTarget};
 use gb_finetune::FinetuneError;
@@ -114,7 +114,8 @@ fn two_ranks_train_what_one_process_trains_at_the_same_global_batch() {
     )
     .unwrap();
     for _ in 0..steps {
-        single.train_step(&src).unwrap();
+        let stats = single.train_step(&src).unwrap();
+        assert_eq!((stats.exchanged_values, stats.exchange_seconds), (0, 0.0));
     }
 
     // two ranks of one micro-batch each; built here, one after the other, since the LoRA's
@@ -145,7 +146,11 @@ fn two_ranks_train_what_one_process_trains_at_the_same_global_batch() {
                 let src = &src;
                 s.spawn(move || {
                     for _ in 0..steps {
-                        t.train_step(src).unwrap();
+                        let stats = t.train_step(src).unwrap();
+                        // every adapter value travels, once per step
+                        let adapters = trainable_values(&t.models.trainable);
+                        assert!(adapters > 0);
+                        assert_eq!(stats.exchanged_values, adapters);
                     }
                     t
                 })

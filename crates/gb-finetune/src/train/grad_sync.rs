@@ -65,6 +65,25 @@ pub fn launched_ranks(var: impl Fn(&str) -> Option<String>) -> Option<usize> {
         .find_map(|name| var(name).and_then(|v| v.trim().parse::<usize>().ok()))
 }
 
+/// Counts the values of the parameters that train (require a gradient).
+struct CountTrainable(usize);
+
+impl ModuleVisitor for CountTrainable {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let value = param.val();
+        if value.is_require_grad() {
+            self.0 += value.shape().num_elements();
+        }
+    }
+}
+
+/// How many values of `module` train: what a full exchange moves per rank and step.
+pub fn trainable_values<M: Module>(module: &M) -> usize {
+    let mut count = CountTrainable(0);
+    module.visit(&mut count);
+    count.0
+}
+
 /// Where one parameter's gradient lies in the flat buffer.
 #[derive(Debug, Clone)]
 struct Slot {
@@ -120,15 +139,16 @@ fn write_back<const D: usize>(
     grads.register(slot.id, tensor);
 }
 
-/// Replaces `grads` (of `module`'s parameters) by their mean over the ranks of `sync`. With
-/// one rank there is nothing to exchange and the gradients stay as they are, untouched.
+/// Replaces `grads` (of `module`'s parameters) by their mean over the ranks of `sync`, and
+/// returns how many values each rank exchanged. With one rank there is nothing to exchange
+/// (0) and the gradients stay as they are, untouched.
 pub fn mean_gradients<M: Module>(
     module: &M,
     grads: &mut GradientsParams,
     sync: &dyn GradSync,
-) -> Result<(), FinetuneError> {
+) -> Result<usize, FinetuneError> {
     if sync.ranks() <= 1 {
-        return Ok(());
+        return Ok(0);
     }
     let mut gather = Gather {
         grads,
@@ -150,7 +170,7 @@ pub fn mean_gradients<M: Module>(
     }
     let Some(device) = device else {
         // no parameter has a gradient: every rank agrees on nothing to exchange
-        return Ok(());
+        return Ok(0);
     };
     sync.mean(&mut buffer)?;
     for slot in &slots {
@@ -167,7 +187,7 @@ pub fn mean_gradients<M: Module>(
             }
         }
     }
-    Ok(())
+    Ok(buffer.len())
 }
 
 #[cfg(test)]
@@ -244,7 +264,8 @@ mod tests {
         let sync = TwoRanks {
             other: RefCell::new(other),
         };
-        mean_gradients(&layer, &mut mine, &sync).unwrap();
+        assert_eq!(mean_gradients(&layer, &mut mine, &sync).unwrap(), 10);
+        assert_eq!(trainable_values(&layer), 10);
         // the mean of the two shards' gradients is the gradient of the mean of their losses
         let loss = (layer.forward(a).powi_scalar(2).sum() + layer.forward(b).powi_scalar(2).sum())
             .div_scalar(2.0);
@@ -290,7 +311,10 @@ mod tests {
         let layer: Linear = LinearConfig::new(4, 2).init(&device);
         let mut grads = grads_of(&layer, input(3, &device));
         let before = values(&grads, &layer);
-        mean_gradients(&layer, &mut grads, &SingleProcess).unwrap();
+        assert_eq!(
+            mean_gradients(&layer, &mut grads, &SingleProcess).unwrap(),
+            0
+        );
         assert_eq!(values(&grads, &layer), before);
         assert_eq!((SingleProcess.rank(), SingleProcess.ranks()), (0, 1));
     }

@@ -41,6 +41,10 @@ pub struct StepStats {
     pub grad_norm: f64,
     /// Whether the update was skipped (non-finite loss or gradient).
     pub skipped: bool,
+    /// Seconds spent exchanging gradients with the other ranks (0 in one process).
+    pub exchange_seconds: f64,
+    /// Gradient values each rank exchanged (`f32`; 0 in one process).
+    pub exchanged_values: usize,
 }
 
 /// A fine-tuning run in memory.
@@ -183,13 +187,20 @@ impl FinetuneTrainer {
         }
         let mut loss = loss_sum / cfg.grad_accum as f64;
         let mut grads = accum.grads();
-        mean_gradients(&self.models.trainable, &mut grads, self.sync.as_ref())?;
+        let exchange = std::time::Instant::now();
+        let exchanged_values =
+            mean_gradients(&self.models.trainable, &mut grads, self.sync.as_ref())?;
         if ranks > 1 {
             // every rank logs, and decides on a non-finite step from, the global batch's loss
             let mut mean = [loss as f32];
             self.sync.mean(&mut mean)?;
             loss = f64::from(mean[0]);
         }
+        let exchange_seconds = if ranks > 1 {
+            exchange.elapsed().as_secs_f64()
+        } else {
+            0.0
+        };
         let norm = clip_global_norm(&self.models.trainable, &mut grads, cfg.clip_grad_norm);
         self.step += 1;
         let skipped = !(loss.is_finite() && norm.is_finite());
@@ -222,6 +233,8 @@ impl FinetuneTrainer {
             loss,
             grad_norm: norm,
             skipped,
+            exchange_seconds,
+            exchanged_values,
         })
     }
 
