@@ -79,6 +79,16 @@ pub fn small_grid_flags<'a>(scene: &'a str, preset: &'a str) -> Vec<&'a str> {
     ]
 }
 
+/// Whether a Slurm answers here: `SLURM_CONF` is set and `sinfo` runs
+/// (`tools/slurm/single_node.sh` starts one).
+pub fn slurm_available() -> bool {
+    std::env::var_os("SLURM_CONF").is_some()
+        && std::process::Command::new("sinfo")
+            .arg("-h")
+            .output()
+            .is_ok_and(|o| o.status.success())
+}
+
 /// A path as `&str` (test paths are UTF-8).
 pub fn path_str(p: &std::path::Path) -> &str {
     p.to_str().expect("non-UTF-8 test path")

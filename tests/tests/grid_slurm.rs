@@ -13,16 +13,9 @@ use std::process::Command;
 use std::time::Instant;
 
 use gb_tests::{
-    assert_success, path_str as s, small_grid_flags, small_preset, small_stairs, xtask,
+    assert_success, path_str as s, slurm_available, small_grid_flags, small_preset, small_stairs,
+    xtask,
 };
-
-fn slurm_available() -> bool {
-    std::env::var_os("SLURM_CONF").is_some()
-        && Command::new("sinfo")
-            .arg("-h")
-            .output()
-            .is_ok_and(|o| o.status.success())
-}
 
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()

@@ -14,7 +14,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
-use gb_tests::{assert_success, path_str as s, xtask, xtask_binary};
+use gb_tests::{assert_success, path_str as s, slurm_available, xtask, xtask_binary};
 
 /// `finetune` of the tiny prior on the procedural pairs, 4 steps, no validation.
 fn finetune_args(out: &Path) -> Vec<String> {
@@ -62,14 +62,6 @@ fn lora(out: &Path) -> BTreeMap<String, Vec<f32>> {
             (name, values)
         })
         .collect()
-}
-
-fn slurm_available() -> bool {
-    std::env::var_os("SLURM_CONF").is_some()
-        && Command::new("sinfo")
-            .arg("-h")
-            .output()
-            .is_ok_and(|o| o.status.success())
 }
 
 #[test]

@@ -225,7 +225,14 @@ mod over_mpi {
                 "GB_MPI_OUT",
                 "-x",
                 "RAYON_NUM_THREADS",
+                "-x",
+                "GB_MPI_FIRST_TIMEOUT",
             ])
+            // a short deadline for the rank that never arrives, the default's for the rest
+            .env(
+                "GB_MPI_FIRST_TIMEOUT",
+                if role == "stall" { "4" } else { "600" },
+            )
             .arg(exe)
             .args([test, "--exact", "--test-threads", "1", "--nocapture"])
             .env("GB_MPI_ROLE", role)
@@ -260,6 +267,10 @@ mod over_mpi {
         )
         .unwrap()
         .with_sync(Box::new(sync));
+        if role == "stall" && rank == 1 {
+            // a rank that never reaches its first exchange
+            std::thread::sleep(Duration::from_secs(120));
+        }
         for step in 0..t.config.steps {
             if role == "die" && rank == 1 && step == 1 {
                 std::process::abort();
@@ -331,6 +342,31 @@ mod over_mpi {
             Duration::from_secs(120),
         );
         assert!(!ok, "mpirun succeeded although rank 1 aborted");
+        assert!(
+            took < Duration::from_secs(60),
+            "the job took {took:?} to end"
+        );
+        assert!(
+            !dir.path().join("rank-0.json").exists(),
+            "rank 0 finished alone"
+        );
+    }
+
+    #[test]
+    fn a_rank_that_never_arrives_ends_the_job_at_the_first_exchange_s_deadline() {
+        if let Ok(role) = std::env::var("GB_MPI_ROLE") {
+            return rank_main(&role);
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let (ok, took) = mpirun(
+            "data_parallel::over_mpi::\
+             a_rank_that_never_arrives_ends_the_job_at_the_first_exchange_s_deadline",
+            "stall",
+            dir.path(),
+            Duration::from_secs(120),
+        );
+        assert!(!ok, "mpirun succeeded although rank 1 never arrived");
+        // rank 0 gives up after 4 s, long before rank 1 wakes (120 s)
         assert!(
             took < Duration::from_secs(60),
             "the job took {took:?} to end"

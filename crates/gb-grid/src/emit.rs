@@ -186,17 +186,25 @@ pub fn write_jobs(
             }
             Engine::Kubernetes => ("job.yaml", kubernetes_job(&grid_dir, cells, opts)),
         };
-        let path = grid_dir.join(file);
-        gb_core::write_atomic(&path, text.as_bytes()).map_err(|e| InpaintError::io(&path, e))?;
-        #[cfg(unix)]
-        if *engine == Engine::Slurm {
-            use std::os::unix::fs::PermissionsExt;
-            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
-                .map_err(|e| InpaintError::io(&path, e))?;
-        }
-        written.push(path);
+        written.push(write_job_file(&grid_dir.join(file), &text, *engine)?);
     }
     Ok(written)
+}
+
+/// Writes one job file atomically; a Slurm script is made executable.
+pub(crate) fn write_job_file(
+    path: &Path,
+    text: &str,
+    engine: Engine,
+) -> Result<PathBuf, InpaintError> {
+    gb_core::write_atomic(path, text.as_bytes()).map_err(|e| InpaintError::io(path, e))?;
+    #[cfg(unix)]
+    if engine == Engine::Slurm {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o755))
+            .map_err(|e| InpaintError::io(path, e))?;
+    }
+    Ok(path.to_path_buf())
 }
 
 #[cfg(test)]

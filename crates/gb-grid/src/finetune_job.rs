@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use gb_inpaint::run::shell_quote;
 use gb_inpaint::InpaintError;
 
-use crate::emit::{EmitOptions, Engine};
+use crate::emit::{write_job_file, EmitOptions, Engine};
 
 /// The Slurm script's name in the output folder.
 pub const SLURM_FILE: &str = "finetune-slurm.sh";
@@ -204,15 +204,7 @@ pub fn write_finetune_jobs(
             Engine::Slurm => (SLURM_FILE, slurm_script(job, opts)),
             Engine::Kubernetes => (MPIJOB_FILE, mpijob_manifest(job, opts)),
         };
-        let path = job.out.join(file);
-        gb_core::write_atomic(&path, text.as_bytes()).map_err(|e| InpaintError::io(&path, e))?;
-        #[cfg(unix)]
-        if *engine == Engine::Slurm {
-            use std::os::unix::fs::PermissionsExt;
-            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
-                .map_err(|e| InpaintError::io(&path, e))?;
-        }
-        written.push(path);
+        written.push(write_job_file(&job.out.join(file), &text, *engine)?);
     }
     Ok(written)
 }

@@ -32,8 +32,10 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
-use gb_grid::emit::{write_jobs, EmitOptions, Engine};
+use gb_grid::emit::{write_jobs, Engine};
 use gb_grid::{self as grid, Grid, GridSettings, MergeReport};
+
+use super::job_resources::JobResources;
 
 /// Arguments of `cargo xtask ablate`.
 #[derive(clap::Args, Debug)]
@@ -65,15 +67,9 @@ pub struct Args {
     /// Only plan the grid into OUT and write its job files: slurm, kubernetes (comma-separated).
     #[arg(long, value_delimiter = ',')]
     pub emit: Option<Vec<Engine>>,
-    /// Container image of the Kubernetes job.
-    #[arg(long, default_value = "gb-nerf:latest")]
-    pub image: String,
-    /// CPU cores per cell in the job files.
-    #[arg(long, default_value_t = 4)]
-    pub cpus: usize,
-    /// GPUs per cell in the job files.
-    #[arg(long, default_value_t = 0)]
-    pub gpus: usize,
+    /// The emitted jobs' image, cores and GPUs.
+    #[command(flatten)]
+    pub jobs: JobResources,
     /// A planned grid's folder: with --cell, run one cell; with --merge, write the tables.
     #[arg(long = "grid", value_name = "GRID", conflicts_with = "scene")]
     pub grid_dir: Option<PathBuf>,
@@ -151,12 +147,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let grid = plan(&args, scene)?;
     if let Some(engines) = &args.emit {
-        let opts = EmitOptions {
-            image: args.image.clone(),
-            cpus: args.cpus,
-            gpus: args.gpus,
-            ..EmitOptions::default()
-        };
+        let opts = args.jobs.emit_options();
         for path in write_jobs(&args.out, grid.cells.len(), engines, &opts)? {
             println!("wrote {}", path.display());
         }

@@ -25,8 +25,11 @@ use gb_finetune::tiny_prior::{run_recipe, SyntheticData};
 use gb_finetune::train::grad_sync::{launched_ranks, GradSync, SingleProcess};
 use gb_finetune::train::{FinetuneConfig, PriorModels};
 use gb_finetune::validate_only::validate_prior;
-use gb_grid::emit::{EmitOptions, Engine};
+
+use gb_grid::emit::Engine;
 use gb_grid::finetune_job::{job_args, write_finetune_jobs, FinetuneJob};
+
+use super::job_resources::JobResources;
 
 /// Arguments of `cargo xtask finetune`.
 #[derive(clap::Args, Debug)]
@@ -136,15 +139,9 @@ pub struct Args {
     /// Ranks (MPI processes) of the emitted jobs, at least 2.
     #[arg(long, requires = "emit")]
     pub ranks: Option<usize>,
-    /// Container image of the MPIJob.
-    #[arg(long, default_value = "gb-nerf:latest")]
-    pub image: String,
-    /// CPU cores per rank in the job files.
-    #[arg(long, default_value_t = 4)]
-    pub cpus: usize,
-    /// GPUs per rank in the job files.
-    #[arg(long, default_value_t = 0)]
-    pub gpus: usize,
+    /// The emitted jobs' image, cores and GPUs per rank.
+    #[command(flatten)]
+    pub jobs: JobResources,
 }
 
 /// `--emit`: the job files of a data-parallel run of this command line
@@ -168,13 +165,7 @@ fn emit_jobs(args: &Args, engines: &[Engine]) -> anyhow::Result<()> {
         workdir: workdir.clone(),
         out: workdir.join(&args.out),
     };
-    let opts = EmitOptions {
-        image: args.image.clone(),
-        cpus: args.cpus,
-        gpus: args.gpus,
-        ..EmitOptions::default()
-    };
-    for path in write_finetune_jobs(&job, engines, &opts)? {
+    for path in write_finetune_jobs(&job, engines, &args.jobs.emit_options())? {
         println!("wrote {}", path.display());
     }
     Ok(())

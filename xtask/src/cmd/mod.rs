@@ -11,6 +11,7 @@ pub mod finetune;
 pub mod fuzz;
 pub mod inpaint;
 pub mod inpaint_image;
+pub mod job_resources;
 pub mod parity;
 pub mod scene;
 pub mod scene_info;
