@@ -329,26 +329,29 @@ mod over_mpi {
         }
     }
 
+    /// Runs `test` as a two-rank job whose rank 1 fails as `role` says, and checks that the
+    /// job fails within 60 s without rank 0 finishing alone.
+    fn assert_the_job_ends(test: &str, role: &str) {
+        let dir = tempfile::tempdir().unwrap();
+        let (ok, took) = mpirun(test, role, dir.path(), Duration::from_secs(120));
+        assert!(!ok, "mpirun succeeded although rank 1 failed ({role})");
+        assert!(
+            took < Duration::from_secs(60),
+            "the job took {took:?} to end"
+        );
+        let finished = dir.path().join("rank-0.json").exists();
+        assert!(!finished, "rank 0 finished alone");
+    }
+
     #[test]
     fn a_rank_that_dies_ends_the_other() {
         if let Ok(role) = std::env::var("GB_MPI_ROLE") {
             return rank_main(&role);
         }
-        let dir = tempfile::tempdir().unwrap();
-        let (ok, took) = mpirun(
+        // rank 1 aborts after its first step
+        assert_the_job_ends(
             "data_parallel::over_mpi::a_rank_that_dies_ends_the_other",
             "die",
-            dir.path(),
-            Duration::from_secs(120),
-        );
-        assert!(!ok, "mpirun succeeded although rank 1 aborted");
-        assert!(
-            took < Duration::from_secs(60),
-            "the job took {took:?} to end"
-        );
-        assert!(
-            !dir.path().join("rank-0.json").exists(),
-            "rank 0 finished alone"
         );
     }
 
@@ -357,23 +360,11 @@ mod over_mpi {
         if let Ok(role) = std::env::var("GB_MPI_ROLE") {
             return rank_main(&role);
         }
-        let dir = tempfile::tempdir().unwrap();
-        let (ok, took) = mpirun(
+        // rank 1 sleeps 120 s before its first exchange; rank 0 gives up after 4 s
+        assert_the_job_ends(
             "data_parallel::over_mpi::\
              a_rank_that_never_arrives_ends_the_job_at_the_first_exchange_s_deadline",
             "stall",
-            dir.path(),
-            Duration::from_secs(120),
-        );
-        assert!(!ok, "mpirun succeeded although rank 1 never arrived");
-        // rank 0 gives up after 4 s, long before rank 1 wakes (120 s)
-        assert!(
-            took < Duration::from_secs(60),
-            "the job took {took:?} to end"
-        );
-        assert!(
-            !dir.path().join("rank-0.json").exists(),
-            "rank 0 finished alone"
         );
     }
 }
