@@ -59,13 +59,13 @@ pub struct RunSummary {
     /// Steps per second in this process.
     pub steps_per_second: f64,
     /// Ranks of the run (1: one process).
-    #[serde(default = "one")]
+    #[serde(default = "crate::train::checkpoint::one_rank")]
     pub ranks: usize,
     /// Seconds of `train_seconds` spent exchanging gradients with the other ranks.
     #[serde(default)]
     pub exchange_seconds: f64,
     /// Bytes of gradient each rank sends per step (and receives back averaged), against
-    /// `lora_bytes`, the adapters' size.
+    /// `trainable_bytes`, the adapters' size.
     #[serde(default)]
     pub exchanged_bytes_per_step: usize,
     /// Bytes of the values that train (`f32`): the adapters of a LoRA run.
@@ -77,10 +77,6 @@ pub struct RunSummary {
     pub validation_final: Option<ValidationReport>,
     /// The exported LoRA file or prior folder.
     pub export: PathBuf,
-}
-
-fn one() -> usize {
-    1
 }
 
 /// The checkpoint file of a run folder.

@@ -68,15 +68,12 @@ impl Default for EmitOptions {
 }
 
 /// A name Kubernetes accepts (lowercase alphanumerics and `-`, at most 52 characters so
-/// that pod names with their index suffix stay under 63).
-fn k8s_name(grid_dir: &Path) -> String {
+/// that pod names with their index suffix stay under 63): `prefix-<folder's name>`.
+pub(crate) fn k8s_name(prefix: &str, dir: &Path) -> String {
     // a folder without a last component (`/`, `..`) leaves the bare prefix
-    let full = match grid_dir.file_name() {
-        Some(stem) => format!(
-            "gb-nerf-grid-{}",
-            stem.to_string_lossy().to_ascii_lowercase()
-        ),
-        None => "gb-nerf-grid".to_string(),
+    let full = match dir.file_name() {
+        Some(stem) => format!("{prefix}-{}", stem.to_string_lossy().to_ascii_lowercase()),
+        None => prefix.to_string(),
     };
     let mut name: String = full
         .chars()
@@ -116,7 +113,7 @@ pub fn slurm_script(grid_dir: &Path, cells: usize, opts: &EmitOptions) -> String
 /// The Kubernetes Indexed Job of a grid of `cells` cells in `grid_dir` (absolute).
 pub fn kubernetes_job(grid_dir: &Path, cells: usize, opts: &EmitOptions) -> String {
     let grid = grid_dir.display().to_string();
-    let name = k8s_name(grid_dir);
+    let name = k8s_name("gb-nerf-grid", grid_dir);
     let gpu_limit = if opts.gpus > 0 {
         format!("\n              nvidia.com/gpu: {}", opts.gpus)
     } else {
@@ -231,11 +228,11 @@ mod tests {
     #[test]
     fn kubernetes_names_are_valid() {
         assert_eq!(
-            k8s_name(Path::new("/x/My_Grid.v2")),
+            k8s_name("gb-nerf-grid", Path::new("/x/My_Grid.v2")),
             "gb-nerf-grid-my-grid-v2"
         );
-        assert_eq!(k8s_name(Path::new("/")), "gb-nerf-grid");
-        let long = k8s_name(Path::new(&"a".repeat(200)));
+        assert_eq!(k8s_name("gb-nerf-grid", Path::new("/")), "gb-nerf-grid");
+        let long = k8s_name("gb-nerf-grid", Path::new(&"a".repeat(200)));
         assert!(long.len() <= 52 && !long.ends_with('-'), "{long}");
     }
 }

@@ -15,12 +15,12 @@
 //! Both run the command line that emitted them, without `--emit` and `--ranks`, with
 //! `--data-parallel mpi`, from the same working folder.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use gb_inpaint::run::shell_quote;
 use gb_inpaint::InpaintError;
 
-use crate::emit::{write_job_file, EmitOptions, Engine};
+use crate::emit::{k8s_name, write_job_file, EmitOptions, Engine};
 
 /// The Slurm script's name in the output folder.
 pub const SLURM_FILE: &str = "finetune-slurm.sh";
@@ -114,20 +114,6 @@ pub fn slurm_script(job: &FinetuneJob, opts: &EmitOptions) -> String {
     )
 }
 
-/// A Kubernetes name from the output folder's name (lowercase alphanumerics and `-`).
-fn job_name(out: &Path) -> String {
-    let stem = out
-        .file_name()
-        .map(|s| s.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    let mut name: String = format!("gb-nerf-finetune-{stem}")
-        .chars()
-        .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
-        .collect();
-    name.truncate(52);
-    name.trim_end_matches('-').to_string()
-}
-
 /// The MPIJob manifest of `job`.
 pub fn mpijob_manifest(job: &FinetuneJob, opts: &EmitOptions) -> String {
     let workdir = job.workdir.display().to_string();
@@ -148,7 +134,7 @@ pub fn mpijob_manifest(job: &FinetuneJob, opts: &EmitOptions) -> String {
     let manifest = serde_json::json!({
         "apiVersion": "kubeflow.org/v2beta1",
         "kind": "MPIJob",
-        "metadata": { "name": job_name(&job.out) },
+        "metadata": { "name": k8s_name("gb-nerf-finetune", &job.out) },
         "spec": {
             "slotsPerWorker": 1,
             "runPolicy": { "cleanPodPolicy": "Running" },
@@ -183,10 +169,10 @@ pub fn mpijob_manifest(job: &FinetuneJob, opts: &EmitOptions) -> String {
             },
         },
     });
-    let body = serde_json::to_string_pretty(&manifest).unwrap_or_default();
+    // `{:#}`: serde_json's pretty form, which cannot fail for a `Value`
     format!(
         "# gb-nerf data-parallel LoRA fine-tuning: {} MPI ranks (Kubeflow MPI Operator).\n\
-         # Apply: kubectl apply -f {MPIJOB_FILE}\n{body}\n",
+         # Apply: kubectl apply -f {MPIJOB_FILE}\n{manifest:#}\n",
         job.ranks
     )
 }
@@ -248,8 +234,8 @@ mod tests {
         let job = FinetuneJob {
             args: job_args(&strings(&["--synthetic", "--out", "runs/lora 1"])),
             ranks: 3,
-            workdir: "/work/me".into(),
-            out: "/work/me/runs/lora 1".into(),
+            workdir: "/cluster/home/me".into(),
+            out: "/cluster/home/me/runs/lora 1".into(),
         };
         let opts = EmitOptions {
             command: "/opt/gb-nerf".into(),
@@ -261,13 +247,16 @@ mod tests {
         for line in [
             "#SBATCH --ntasks=3\n",
             "#SBATCH --cpus-per-task=2\n",
-            "#SBATCH --chdir=/work/me\n",
+            "#SBATCH --chdir=/cluster/home/me\n",
             "cmd=\"${GB_NERF:-/opt/gb-nerf}\"\n",
             "exec mpirun -n \"$SLURM_NTASKS\" -x RAYON_NUM_THREADS \"$cmd\" finetune \
              --synthetic --out 'runs/lora 1' --data-parallel mpi\n",
         ] {
             assert!(s.contains(line), "no {line:?} in\n{s}");
         }
-        assert_eq!(job_name(&job.out), "gb-nerf-finetune-lora-1");
+        assert_eq!(
+            k8s_name("gb-nerf-finetune", &job.out),
+            "gb-nerf-finetune-lora-1"
+        );
     }
 }

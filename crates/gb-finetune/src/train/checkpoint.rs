@@ -48,7 +48,8 @@ pub struct CheckpointMeta {
     pub ranks: usize,
 }
 
-fn one_rank() -> usize {
+/// One rank: what a file written before the rank count was recorded stands for.
+pub(crate) fn one_rank() -> usize {
     1
 }
 
