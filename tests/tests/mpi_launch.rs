@@ -1,7 +1,7 @@
 //! Data-parallel fine-tuning through the command line (issue 35): `mpirun -n 2 gb-nerf
 //! finetune` trains what one process with twice the gradient accumulation trains (losses
 //! and LoRA within 1e-5), and the Slurm job that `finetune --emit slurm --ranks 2` writes,
-//! submitted to a real Slurm, writes the same LoRA file as `mpirun -n 2`, byte for byte.
+//! submitted to a real Slurm, writes the LoRA that `mpirun -n 2` writes (within 1e-5).
 //!
 //! It needs `gb-nerf` built with the `mpi` feature and Open MPI's `mpirun`:
 //! `GB_TEST_MPI=1 cargo test --workspace --features xtask/mpi --test integration --test help
@@ -46,6 +46,28 @@ fn losses(out: &Path) -> Vec<f64> {
                 .unwrap()
         })
         .collect()
+}
+
+/// Every LoRA tensor of `a` within 1e-5 (relative, in norm) of `b`'s, with the same names.
+fn assert_same_lora(a: &Path, b: &Path, what: &str) {
+    let (la, lb) = (lora(a), lora(b));
+    assert_eq!(
+        la.keys().collect::<Vec<_>>(),
+        lb.keys().collect::<Vec<_>>(),
+        "{what}"
+    );
+    for (k, v) in &lb {
+        let diff: f64 = v
+            .iter()
+            .zip(&la[k])
+            .map(|(x, y)| f64::from(x - y).powi(2))
+            .sum();
+        let norm: f64 = v.iter().map(|x| f64::from(*x).powi(2)).sum();
+        assert!(
+            diff.sqrt() <= 1e-5 * norm.sqrt().max(1e-12),
+            "{what}: {k}: squared difference {diff:e} against squared norm {norm:e}"
+        );
+    }
 }
 
 fn lora(out: &Path) -> BTreeMap<String, Vec<f32>> {
@@ -96,20 +118,7 @@ fn mpirun_and_the_slurm_job_train_what_one_process_trains() {
     for (x, y) in a.iter().zip(&b) {
         assert!((x - y).abs() <= 1e-5 * y.abs(), "loss {x} against {y}");
     }
-    let (la, lb) = (lora(&ranked), lora(&single));
-    assert_eq!(la.keys().collect::<Vec<_>>(), lb.keys().collect::<Vec<_>>());
-    for (k, v) in &lb {
-        let diff: f64 = v
-            .iter()
-            .zip(&la[k])
-            .map(|(x, y)| f64::from(x - y).powi(2))
-            .sum();
-        let norm: f64 = v.iter().map(|x| f64::from(*x).powi(2)).sum();
-        assert!(
-            diff.sqrt() <= 1e-5 * norm.sqrt().max(1e-12),
-            "{k}: {diff:e} against {norm:e}"
-        );
-    }
+    assert_same_lora(&ranked, &single, "mpirun -n 2 against --grad-accum 2");
 
     if !slurm_available() {
         assert!(
@@ -147,10 +156,9 @@ fn mpirun_and_the_slurm_job_train_what_one_process_trains() {
         String::from_utf8_lossy(&submitted.stdout),
         String::from_utf8_lossy(&submitted.stderr),
     );
-    let name = "pytorch_lora_weights.safetensors";
-    assert_eq!(
-        std::fs::read(job.join(name)).unwrap(),
-        std::fs::read(ranked.join(name)).unwrap(),
-        "the Slurm job's LoRA differs from mpirun -n 2's"
-    );
+    // Inside the allocation Open MPI may bind each rank to a core (the oversubscribed mpirun
+    // above is not bound), and the kernels then see other CPU counts: CI's run once differed
+    // in the last bits. The same tolerance, not the same bytes.
+    let what = format!("the Slurm job against mpirun -n 2 (job log: {slurm_log})");
+    assert_same_lora(&job, &ranked, &what);
 }
