@@ -10,8 +10,8 @@ use burn::tensor::{Tensor, TensorData};
 use gb_core::BackendKind;
 use gb_diffusion::distill::sd_adapter::SdPrior;
 use gb_diffusion::distill::{
-    distill_view, DistillSettings, GuidanceMethod, PriorInputMode, PriorModels, PromptCache,
-    ScoreDistiller, ViewConditioning,
+    distill_view, DistillSettings, GuidanceMethod, PriorInputMode, PromptCache, ScoreDistiller,
+    ViewConditioning, ViewStepModels,
 };
 
 /// Arguments of `distill-bench`.
@@ -61,7 +61,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let image = Tensor::<4>::from_data(TensorData::new(pixels, [1, 3, res, res]), &device);
     let mask = Tensor::<4>::from_data(TensorData::new(mask, [1, 1, res, res]), &device);
     let view = ViewConditioning::new(0, &prior.encoder, image.clone(), mask, res)?;
-    let models = PriorModels {
+    let models = ViewStepModels {
         unet: &prior.unet,
         encoder: &prior.encoder,
     };

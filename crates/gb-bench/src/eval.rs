@@ -20,6 +20,7 @@ use gb_eval::disparity::{d_psnr, ScalarMap};
 use gb_eval::fid::FidExtractor;
 use gb_eval::image_metrics::{psnr, ssim, Region};
 use gb_eval::stlpips::StLpips;
+use gb_eval::PerceptualDistance;
 use serde_json::{json, Value};
 
 /// The modules `tools/eval_parity/bench_ref.py` imports (`stlpips_pytorch` needs

@@ -15,6 +15,7 @@ pub mod suite;
 
 pub use error::MetricError;
 pub use image_metrics::{psnr, ssim, Region};
+pub use lpips::PerceptualDistance;
 
 /// The metric weights folder used when none is given: `$GB_TEST_DATA/weights` when it
 /// exists. A relative `GB_TEST_DATA` is taken against the current folder.

@@ -279,23 +279,33 @@ impl Lpips {
             device: device.clone(),
         })
     }
+}
 
-    /// LPIPS distance between `pred` and `gt` (lower is better; 0 for identical images).
-    pub fn distance(&self, pred: &RgbImage, gt: &RgbImage) -> Result<f64, MetricError> {
+impl PerceptualDistance for Lpips {
+    fn distance(&self, pred: &RgbImage, gt: &RgbImage) -> Result<f64, MetricError> {
         let (name, min) = (self.net.backbone.name(), self.net.backbone.min_side());
         let check =
             |img: &RgbImage| size_check(img, name, min, img.width >= min && img.height >= min);
         pair_distance(pred, gt, &self.device, check, |p, g| self.net.forward(p, g))
     }
+}
 
-    /// LPIPS over the crop with columns `x0..x1` and rows `y0..y1` (ends exclusive).
-    pub fn distance_bbox(
+/// A perceptual network's distance between two images of one size: LPIPS ([`Lpips`]) and
+/// ST-LPIPS ([`crate::stlpips::StLpips`]). Lower is better; 0 for identical images.
+pub trait PerceptualDistance {
+    /// The distance between `pred` and `gt` over the whole images.
+    fn distance(&self, pred: &RgbImage, gt: &RgbImage) -> Result<f64, MetricError>;
+
+    /// The distance over the crop with columns `x0..x1` and rows `y0..y1` (ends exclusive).
+    fn distance_bbox(
         &self,
         pred: &RgbImage,
         gt: &RgbImage,
-        bbox: (usize, usize, usize, usize),
+        (x0, y0, x1, y1): (usize, usize, usize, usize),
     ) -> Result<f64, MetricError> {
-        box_distance(pred, gt, bbox, |p, g| self.distance(p, g))
+        check_pair(pred, gt)?;
+        check_bbox(x0, y0, x1, y1, pred.width, pred.height)?;
+        self.distance(&crop(pred, x0, y0, x1, y1), &crop(gt, x0, y0, x1, y1))
     }
 }
 
@@ -333,18 +343,6 @@ pub(crate) fn size_check(
     })
 }
 
-/// `distance` over the crop with columns `x0..x1` and rows `y0..y1` (ends exclusive) of two
-/// images of one size.
-pub(crate) fn box_distance(
-    pred: &RgbImage,
-    gt: &RgbImage,
-    (x0, y0, x1, y1): (usize, usize, usize, usize),
-    distance: impl Fn(&RgbImage, &RgbImage) -> Result<f64, MetricError>,
-) -> Result<f64, MetricError> {
-    check_pair(pred, gt)?;
-    check_bbox(x0, y0, x1, y1, pred.width, pred.height)?;
-    distance(&crop(pred, x0, y0, x1, y1), &crop(gt, x0, y0, x1, y1))
-}
 /// The crop `x0..x1`, `y0..y1` of an image (bounds already checked).
 fn crop(img: &RgbImage, x0: usize, y0: usize, x1: usize, y1: usize) -> RgbImage {
     let mut data = Vec::with_capacity((x1 - x0) * (y1 - y0) * 3);

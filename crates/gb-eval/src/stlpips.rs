@@ -32,7 +32,7 @@ use burn::tensor::{Device, Tensor};
 use gb_core::RgbImage;
 
 use crate::error::MetricError;
-use crate::lpips::{box_distance, distance_from_features, pair_distance, size_check};
+use crate::lpips::{distance_from_features, pair_distance, size_check, PerceptualDistance};
 
 /// Channels of the five AlexNet feature maps LPIPS compares.
 const CHANNELS: [usize; 5] = [64, 192, 384, 256, 256];
@@ -227,24 +227,15 @@ impl StLpips {
             device: device.clone(),
         })
     }
+}
 
-    /// ST-LPIPS distance between `pred` and `gt` (lower is better; 0 for identical images).
-    pub fn distance(&self, pred: &RgbImage, gt: &RgbImage) -> Result<f64, MetricError> {
+impl PerceptualDistance for StLpips {
+    fn distance(&self, pred: &RgbImage, gt: &RgbImage) -> Result<f64, MetricError> {
         let check = |img: &RgbImage| {
             let fits = side_is_valid(img.width) && side_is_valid(img.height);
             size_check(img, "ST-LPIPS", MIN_SIDE, fits)
         };
         pair_distance(pred, gt, &self.device, check, |p, g| self.net.forward(p, g))
-    }
-
-    /// ST-LPIPS over the crop with columns `x0..x1` and rows `y0..y1` (ends exclusive).
-    pub fn distance_bbox(
-        &self,
-        pred: &RgbImage,
-        gt: &RgbImage,
-        bbox: (usize, usize, usize, usize),
-    ) -> Result<f64, MetricError> {
-        box_distance(pred, gt, bbox, |p, g| self.distance(p, g))
     }
 }
 

@@ -9,7 +9,7 @@ use std::path::Path;
 
 use common::{expected, image, number, Deviation};
 use gb_core::BackendKind;
-use gb_eval::lpips::{Backbone, Lpips};
+use gb_eval::lpips::{Backbone, Lpips, PerceptualDistance};
 use safetensors::tensor::{Dtype, TensorView};
 
 const TOL: f64 = 1e-4;

@@ -7,6 +7,7 @@ use common::{expected, image, number, Deviation};
 use gb_core::{heavy_test_backends, test_data_dir};
 use gb_eval::stlpips::StLpips;
 use gb_eval::MetricError;
+use gb_eval::PerceptualDistance;
 
 const TOL: f64 = 1e-4;
 

@@ -29,13 +29,13 @@ use gb_core::{RgbImage, TensorValuesError};
 use gb_diffusion::distill::prior_input::bilinear_resize;
 use gb_diffusion::distill::{LatentEncoder, PriorInputMode};
 use gb_nerf::field::NerfField;
-use gb_nerf::render::image::NormalSource;
-use gb_nerf::render::rays::{all_pixels, camera_rays, crop_camera, crop_pixels};
+use gb_nerf::render::image::{ImageSettings, NormalSource};
+use gb_nerf::render::rays::{all_pixels, crop_camera, crop_pixels};
 use gb_nerf::render::{
     density_gradient_normals, depth_to_normals, render_samples, render_samples_appearance_only,
-    sample_and_prune, Background, Intrinsics, PlaneFitConfig,
+    Intrinsics, PlaneFitConfig,
 };
-use gb_nerf::sampler::{OccupancyGrid, RayBatch, SceneSpace};
+use gb_nerf::sampler::RayBatch;
 use gb_nerf::scene::{Camera, Mask};
 use gb_nerf::train::data::TrainView;
 use rand_chacha::ChaCha8Rng;
@@ -173,20 +173,9 @@ pub fn masked_image_latents(
 pub struct RenderContext<'a> {
     /// The field (autodiff device).
     pub field: &'a NerfField,
-    /// Scene parameterisation.
-    pub space: &'a SceneSpace,
-    /// Near bound.
-    pub near: f32,
-    /// Far bound.
-    pub far: f32,
-    /// Samples per ray.
-    pub samples_per_ray: usize,
-    /// Empty-space skipping.
-    pub occupancy: Option<&'a OccupancyGrid>,
-    /// Background.
-    pub background: Background,
-    /// Normal source.
-    pub normals: NormalSource,
+    /// How rays are cast, sampled and composited: the trainer's image settings (its chunk
+    /// size is not used here).
+    pub rays: ImageSettings<'a>,
     /// Whether the RGB prior input's graph reaches only the colour head (the method's
     /// `rgb_moves_geometry = false`); the normal map always reaches the geometry.
     pub rgb_appearance_only: bool,
@@ -195,7 +184,7 @@ pub struct RenderContext<'a> {
 impl RenderContext<'_> {
     /// The ray of `camera` through the continuous pixel `pixel`, within the scene's bounds.
     pub fn ray_through(&self, camera: &Camera, pixel: [f32; 2]) -> RayBatch {
-        camera_rays(camera, &[pixel], self.space, self.near, self.far)
+        self.rays.rays(camera, &[pixel])
     }
 }
 
@@ -271,24 +260,17 @@ fn render_pixels(
     want_normals: bool,
     appearance_only: bool,
 ) -> Result<(Tensor<2>, Tensor<1>, Option<Tensor<2>>), TensorValuesError> {
-    let rays = camera_rays(camera, pixels, ctx.space, ctx.near, ctx.far);
-    let samples = sample_and_prune::<ChaCha8Rng>(
-        ctx.field,
-        &rays,
-        ctx.space,
-        ctx.samples_per_ray,
-        ctx.occupancy,
-        None,
-    )?;
+    let rays = ctx.rays.rays(camera, pixels);
+    let samples = ctx.rays.samples::<ChaCha8Rng>(ctx.field, &rays, None)?;
     let out = if appearance_only {
-        render_samples_appearance_only(ctx.field, &samples, ctx.background)
+        render_samples_appearance_only(ctx.field, &samples, ctx.rays.background)
     } else {
-        render_samples(ctx.field, &samples, ctx.background)
+        render_samples(ctx.field, &samples, ctx.rays.background)
     };
-    let normals = match (want_normals, ctx.normals) {
+    let normals = match (want_normals, ctx.rays.normals) {
         (true, NormalSource::DensityGradient { step }) => Some(density_gradient_normals(
             ctx.field,
-            ctx.space,
+            ctx.rays.space,
             &samples,
             out.weights.clone(),
             out.opacity.clone(),
@@ -367,7 +349,7 @@ pub fn render_normal_input(
     let rn = (r / divisor.max(1)).max(4).min(r);
     let camera = g.camera(rn);
     let grid = all_pixels(rn, rn);
-    let want_gradient = matches!(ctx.normals, NormalSource::DensityGradient { .. });
+    let want_gradient = matches!(ctx.rays.normals, NormalSource::DensityGradient { .. });
     let (_, depth, normals) = render_pixels(ctx, &camera, &grid, want_gradient, false)?;
     let plane_fit = |cfg: PlaneFitConfig| {
         depth_to_normals(
@@ -376,7 +358,7 @@ pub fn render_normal_input(
             g.plane_fit_for(cfg, rn),
         )
     };
-    let normals: Tensor<3> = match (ctx.normals, normals) {
+    let normals: Tensor<3> = match (ctx.rays.normals, normals) {
         (NormalSource::DensityGradient { .. }, Some(n)) => n.reshape([rn, rn, 3]),
         (NormalSource::PlaneFit(cfg), _) => plane_fit(cfg),
         // not reached: density-gradient normals are always rendered above

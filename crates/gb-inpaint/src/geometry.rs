@@ -18,7 +18,7 @@
 
 use burn::tensor::Tensor;
 use gb_core::TensorValuesError;
-use gb_nerf::render::{render_samples, sample_and_prune};
+use gb_nerf::render::render_samples;
 use gb_nerf::sampler::RayBatch;
 use gb_nerf::train::data::TrainView;
 use gb_nerf::train::losses::distortion_of;
@@ -123,28 +123,21 @@ impl HiddenDepth {
         let mut target = Vec::with_capacity(2 * n);
         for _ in 0..n {
             let p = self.pixels[rng.random_range(0..self.pixels.len())];
-            target.extend(disparity_pair(ctx.near, p.depth));
+            target.extend(disparity_pair(ctx.rays.near, p.depth));
             let Some(view) = views.get(p.view) else {
                 return Ok(None);
             };
             rays.append(ctx.ray_through(&view.camera, p.pixel));
         }
-        let samples = sample_and_prune(
-            ctx.field,
-            &rays,
-            ctx.space,
-            ctx.samples_per_ray,
-            ctx.occupancy,
-            Some(&mut rng),
-        )?;
-        let out = render_samples(ctx.field, &samples, ctx.background);
+        let samples = ctx.rays.samples(ctx.field, &rays, Some(&mut rng))?;
+        let out = render_samples(ctx.field, &samples, ctx.rays.background);
         let mut loss = Tensor::<1>::zeros([1], &ctx.field.device());
         if self.config.depth_weight > 0.0 {
-            let d = disparity_toward(out.disparity, target, ctx.near);
+            let d = disparity_toward(out.disparity, target, ctx.rays.near);
             loss = loss + d.mul_scalar(self.config.depth_weight);
         }
         if self.config.distortion_weight > 0.0 {
-            let dl = distortion_of(out.weights, &rays, &samples, ctx.space.spacing());
+            let dl = distortion_of(out.weights, &rays, &samples, ctx.rays.space.spacing());
             loss = loss + dl.mul_scalar(self.config.distortion_weight);
         }
         Ok(Some(loss))

@@ -35,7 +35,7 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use gb_core::{f32_values, TensorValuesError};
 use gb_nerf::field::NerfField;
-use gb_nerf::render::rays::{all_pixels, camera_rays};
+use gb_nerf::render::rays::all_pixels;
 use gb_nerf::render::render_rays;
 use gb_nerf::sampler::RayBatch;
 use gb_nerf::train::data::TrainView;
@@ -182,7 +182,7 @@ impl ObservedMap {
         let grid = all_pixels(rv, rv);
         let pixels: Vec<[f32; 2]> = geometry.masked.iter().map(|&i| grid[i]).collect();
         let field = ctx.field.valid();
-        let rays = camera_rays(&camera, &pixels, ctx.space, ctx.near, ctx.far);
+        let rays = ctx.rays.rays(&camera, &pixels);
         let depth = render_depth(&field, ctx, &rays)?;
         let points: Vec<[f32; 3]> = (0..pixels.len())
             .map(|k| {
@@ -281,7 +281,7 @@ pub(crate) fn observed_points(
             owner.push(k);
             expected.push(z);
         }
-        let r = camera_rays(cam, &px_list, ctx.space, ctx.near, ctx.far);
+        let r = ctx.rays.rays(cam, &px_list);
         seen.extend(render_depth(field, ctx, &r)?);
     }
     let mut hit = vec![false; points.len()];
@@ -312,11 +312,11 @@ pub(crate) fn render_depth(
         };
         let (o, _) = render_rays::<ChaCha8Rng>(
             field,
-            ctx.space,
+            ctx.rays.space,
             &chunk,
-            ctx.samples_per_ray,
-            ctx.occupancy,
-            ctx.background,
+            ctx.rays.samples_per_ray,
+            ctx.rays.occupancy,
+            ctx.rays.background,
             None,
         )?;
         out.extend(f32_values(o.depth.into_data(), "visibility depth")?);

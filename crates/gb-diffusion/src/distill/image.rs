@@ -9,8 +9,8 @@ use burn::tensor::{Tensor, TensorData};
 use gb_core::RgbImage;
 
 use super::{
-    distill_view, DistillError, DistillSettings, MaskBox, PriorInputMode, PriorModels, PromptCache,
-    PromptEmbeddings, ScoreDistiller, SdPrior, StepDiagnostics, ViewConditioning,
+    distill_view, DistillError, DistillSettings, MaskBox, PriorInputMode, PromptCache,
+    PromptEmbeddings, ScoreDistiller, SdPrior, StepDiagnostics, ViewConditioning, ViewStepModels,
 };
 
 /// Adam's epsilon on the pixels (PyTorch's default; Burn's is 1e-5).
@@ -103,7 +103,7 @@ impl<'a> ImageDistillation<'a> {
     /// One step: the distillation gradient on the pixels, then Adam, clamped to `[0, 1]`.
     pub fn step(&mut self) -> Result<StepDiagnostics, DistillError> {
         let render = self.pixels.clone().autodiff().require_grad();
-        let models = PriorModels {
+        let models = ViewStepModels {
             unet: &self.prior.unet,
             encoder: &self.prior.encoder,
         };

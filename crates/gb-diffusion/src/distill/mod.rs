@@ -55,4 +55,4 @@ pub use sd_prior::{PriorInfo, PriorOptions, SdPrior};
 pub use sds::Sds;
 pub use step::{DistillOutput, DistillSettings, LatentTarget, PromptEmbeddings, ScoreDistiller};
 pub use timestep::{TimestepConfig, TimestepSchedule, Weighting};
-pub use view_step::{distill_view, prior_image, PriorModels};
+pub use view_step::{distill_view, prior_image, ViewStepModels};

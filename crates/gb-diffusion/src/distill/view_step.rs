@@ -11,7 +11,7 @@ use super::prior_input::{compose, crop_resize, PriorInputMode};
 use super::step::{DistillOutput, LatentTarget, PromptEmbeddings, ScoreDistiller};
 
 /// The models a view step needs.
-pub struct PriorModels<'a> {
+pub struct ViewStepModels<'a> {
     /// The inpainting U-Net (or any eps-predictor).
     pub unet: &'a dyn InpaintEpsPredictor,
     /// The VAE encoder (or any differentiable latent encoder).
@@ -47,7 +47,7 @@ pub fn prior_image(
 /// whose conditioning is cached.
 pub fn distill_view(
     distiller: &mut ScoreDistiller,
-    models: &PriorModels<'_>,
+    models: &ViewStepModels<'_>,
     render: Tensor<4>,
     view: &ViewConditioning,
     view_index: usize,

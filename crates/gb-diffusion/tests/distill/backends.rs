@@ -2,8 +2,8 @@
 
 use gb_core::{test_backends, BackendKind};
 use gb_diffusion::distill::{
-    distill_view, DistillSettings, GuidanceMethod, PriorInputMode, PriorModels, PromptEmbeddings,
-    ScoreDistiller, TimestepConfig, ViewConditioning, Weighting,
+    distill_view, DistillSettings, GuidanceMethod, PriorInputMode, PromptEmbeddings,
+    ScoreDistiller, TimestepConfig, ViewConditioning, ViewStepModels, Weighting,
 };
 
 use crate::distill::fixture::sd_alphas;
@@ -35,7 +35,7 @@ fn run(kind: BackendKind, method: GuidanceMethod, seed: u64) -> (Vec<usize>, Vec
         negative: Some(tensor(randn(6, 8), [1, 2, 4], &device)),
     };
     let unet = MockUnet::default();
-    let models = PriorModels {
+    let models = ViewStepModels {
         unet: &unet,
         encoder: &encoder,
     };

@@ -2,8 +2,8 @@
 
 use gb_core::BackendKind;
 use gb_diffusion::distill::{
-    distill_view, DistillSettings, GuidanceMethod, PriorInputMode, PriorModels, PromptEmbeddings,
-    ScoreDistiller, TimestepConfig, ViewConditioning, Weighting,
+    distill_view, DistillSettings, GuidanceMethod, PriorInputMode, PromptEmbeddings,
+    ScoreDistiller, TimestepConfig, ViewConditioning, ViewStepModels, Weighting,
 };
 
 use crate::distill::fixture::{half_mask, sd_alphas, Scene, LH, LW, TIMESTEP};
@@ -84,7 +84,7 @@ fn render_gradient_is_zero_outside_the_pixel_mask_when_pasted() {
         negative: Some(tensor(randn(6, 12), [1, 3, 4], &device)),
     };
     let unet = MockUnet::default();
-    let models = PriorModels {
+    let models = ViewStepModels {
         unet: &unet,
         encoder: &encoder,
     };

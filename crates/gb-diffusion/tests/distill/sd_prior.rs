@@ -9,7 +9,7 @@ use gb_diffusion::distill::gradient::surrogate_loss;
 use gb_diffusion::distill::sd_adapter::{SdPrior, SdVaeEncoder};
 use gb_diffusion::distill::{
     distill_view, DistillSettings, GuidanceMethod, LatentEncoder, LatentTarget, PriorInputMode,
-    PriorModels, PromptCache, ScoreDistiller, ViewConditioning,
+    PromptCache, ScoreDistiller, ViewConditioning, ViewStepModels,
 };
 use gb_diffusion::models::load_vae;
 
@@ -100,7 +100,7 @@ fn one_step_of_each_method_on_the_tiny_inpainting_prior() {
     )
     .expect("view");
     assert_eq!(view.masked_image_latents.dims(), [1, 4, 8, 8]);
-    let models = PriorModels {
+    let models = ViewStepModels {
         unet: &prior.unet,
         encoder: &prior.encoder,
     };

@@ -7,7 +7,7 @@ use gb_core::RgbImage;
 
 use crate::error::MetricError;
 use crate::image_metrics::Region;
-use crate::lpips::{Backbone, Lpips};
+use crate::lpips::{Backbone, Lpips, PerceptualDistance};
 use crate::stlpips::StLpips;
 
 /// The LPIPS network.
@@ -70,16 +70,14 @@ impl LpipsModel {
         g: &RgbImage,
         region: &Region,
     ) -> Result<f64, MetricError> {
-        match (self, region) {
-            (LpipsModel::Shift(m), Region::Full) => m.distance(p, g),
-            (LpipsModel::Standard(m), Region::Full) => m.distance(p, g),
-            (LpipsModel::Shift(m), Region::BBox { x0, y0, x1, y1 }) => {
-                m.distance_bbox(p, g, (*x0, *y0, *x1, *y1))
-            }
-            (LpipsModel::Standard(m), Region::BBox { x0, y0, x1, y1 }) => {
-                m.distance_bbox(p, g, (*x0, *y0, *x1, *y1))
-            }
-            (_, Region::Mask(_)) => Err(MetricError::InvalidInput {
+        let model: &dyn PerceptualDistance = match self {
+            LpipsModel::Shift(m) => m,
+            LpipsModel::Standard(m) => m,
+        };
+        match region {
+            Region::Full => model.distance(p, g),
+            Region::BBox { x0, y0, x1, y1 } => model.distance_bbox(p, g, (*x0, *y0, *x1, *y1)),
+            Region::Mask(_) => Err(MetricError::InvalidInput {
                 what: "LPIPS",
                 reason: "has no per-pixel mask variant".into(),
             }),

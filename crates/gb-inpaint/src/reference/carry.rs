@@ -3,7 +3,6 @@
 
 use burn::module::Module;
 use gb_core::TensorValuesError;
-use gb_nerf::render::rays::camera_rays;
 use gb_nerf::train::data::TrainView;
 use serde::{Deserialize, Serialize};
 
@@ -93,7 +92,7 @@ fn reference_depth(
         .iter()
         .map(|[x, y]| [*x as f32 + 0.5, *y as f32 + 0.5])
         .collect();
-    let rays = camera_rays(cam, &px, ctx.space, ctx.near, ctx.far);
+    let rays = ctx.rays.rays(cam, &px);
     let depth = render_depth(field, ctx, &rays)?;
     let mut map = vec![f32::NAN; cam.width * cam.height];
     for ([x, y], d) in r.pixels.iter().zip(depth) {
@@ -151,7 +150,7 @@ pub fn carry(
             .iter()
             .map(|[x, y]| [*x as f32 + 0.5, *y as f32 + 0.5])
             .collect();
-        let rays = camera_rays(&view.camera, &px, ctx.space, ctx.near, ctx.far);
+        let rays = ctx.rays.rays(&view.camera, &px);
         let depth = render_depth(&field, ctx, &rays)?;
         tested.push(TestedView {
             view: j,

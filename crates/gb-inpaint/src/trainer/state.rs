@@ -198,14 +198,8 @@ impl GuidedTrainer {
     pub(super) fn render_context(&self) -> RenderContext<'_> {
         RenderContext {
             field: &self.nerf.field,
-            space: &self.nerf.space,
-            near: self.nerf.near,
-            far: self.nerf.far,
-            samples_per_ray: self.nerf.config.sampler.samples_per_ray,
-            occupancy: self.nerf.occupancy.as_ref(),
+            rays: self.nerf.image_settings(),
             rgb_appearance_only: !self.method.rgb_moves_geometry,
-            background: self.nerf.background,
-            normals: self.nerf.config.render.normals,
         }
     }
 }

@@ -10,7 +10,7 @@ use super::normals::{depth_to_normals, Intrinsics, PlaneFitConfig};
 use super::rays::{all_pixels, camera_rays};
 use super::{density_gradient_normals, render_samples, sample_and_prune, Background};
 use crate::field::NerfField;
-use crate::sampler::{OccupancyGrid, SceneSpace};
+use crate::sampler::{OccupancyGrid, RayBatch, SampleSet, SceneSpace};
 use crate::scene::Camera;
 
 /// Where normals come from.
@@ -62,6 +62,31 @@ pub struct ImageSettings<'a> {
     pub chunk: usize,
 }
 
+impl ImageSettings<'_> {
+    /// The rays of `camera` through the continuous pixels `pixels`, within these bounds.
+    pub fn rays(&self, camera: &Camera, pixels: &[[f32; 2]]) -> RayBatch {
+        camera_rays(camera, pixels, self.space, self.near, self.far)
+    }
+
+    /// The samples of `rays` in `field` with these settings' samples per ray and skipping,
+    /// jittered by `rng` (none: the fixed positions an image render uses).
+    pub fn samples<R: rand::Rng>(
+        &self,
+        field: &NerfField,
+        rays: &RayBatch,
+        rng: Option<&mut R>,
+    ) -> Result<SampleSet, TensorValuesError> {
+        sample_and_prune(
+            field,
+            rays,
+            self.space,
+            self.samples_per_ray,
+            self.occupancy,
+            rng,
+        )
+    }
+}
+
 /// Renders the rays of `camera` through `pixels` as an image render samples them (no
 /// jitter, the settings' skipping), with `field`'s graph.
 pub(crate) fn render_pixels(
@@ -69,16 +94,9 @@ pub(crate) fn render_pixels(
     camera: &Camera,
     pixels: &[[f32; 2]],
     settings: &ImageSettings,
-) -> Result<(super::VolumeOutput, crate::sampler::SampleSet), TensorValuesError> {
-    let rays = camera_rays(camera, pixels, settings.space, settings.near, settings.far);
-    let samples = sample_and_prune::<rand_chacha::ChaCha8Rng>(
-        field,
-        &rays,
-        settings.space,
-        settings.samples_per_ray,
-        settings.occupancy,
-        None,
-    )?;
+) -> Result<(super::VolumeOutput, SampleSet), TensorValuesError> {
+    let rays = settings.rays(camera, pixels);
+    let samples = settings.samples::<rand_chacha::ChaCha8Rng>(field, &rays, None)?;
     Ok((
         render_samples(field, &samples, settings.background),
         samples,
