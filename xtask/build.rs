@@ -34,7 +34,11 @@ fn main() {
         .expect("the repository's assets/ folder");
     println!("cargo:rerun-if-changed={}", root.display());
     let mut all = Vec::new();
-    files(&root, &mut all);
+    // without the `embed-assets` feature the table is empty and the command reads
+    // $GB_ASSETS (or the source tree) instead
+    if std::env::var_os("CARGO_FEATURE_EMBED_ASSETS").is_some() {
+        files(&root, &mut all);
+    }
     let mut hasher = std::collections::hash_map::DefaultHasher::new();
     let mut table = String::from("/// The embedded assets: (path relative to `assets/`, bytes).\n");
     table.push_str("pub static FILES: &[(&str, &[u8])] = &[\n");

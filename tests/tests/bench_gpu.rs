@@ -18,6 +18,8 @@ use gb_tests::{assert_success, path_str as s, workspace_root, xtask};
 fn smoke_through_the_bundle(device: &str, dir: &Path) -> PathBuf {
     let (bundle, empty) = (dir.join("bundle"), dir.join("empty"));
     std::fs::create_dir_all(&empty).unwrap();
+    // a loader package that must stay packed where the machine has a loader
+    std::fs::write(empty.join("not-a-package.deb"), b"not a package").unwrap();
     let prepare = |limit_mib: &str| {
         xtask(&[
             "bench",
@@ -32,6 +34,7 @@ fn smoke_through_the_bundle(device: &str, dir: &Path) -> PathBuf {
             "0",
             "--carry-limit-mib",
             limit_mib,
+            "--with-assets",
         ])
     };
     let refused = prepare("1");
@@ -58,7 +61,11 @@ fn smoke_through_the_bundle(device: &str, dir: &Path) -> PathBuf {
     assert!(xz < binary["stripped_bytes"].as_u64().unwrap(), "{binary}");
     assert!(manifest["tracked_tree_bytes"].as_u64().unwrap() > 1 << 20);
     assert_eq!(manifest["wheels"], serde_json::json!([]));
+    assert_eq!(manifest["debs"], serde_json::json!(["not-a-package.deb"]));
     assert!(!bundle.join("site.tar.xz").exists());
+    assert_eq!(manifest["assets_in_bundle"], true);
+    assert!(bundle.join("assets/tiny-prior/model_index.json").is_file());
+    assert!(bundle.join("tools/bench/unet_bench.py").is_file());
 
     let out = dir.join("out");
     let run = Command::new("bash")
@@ -72,6 +79,13 @@ fn smoke_through_the_bundle(device: &str, dir: &Path) -> PathBuf {
     assert_success(&run, "bash BUNDLE/run.sh --smoke");
     let log = std::fs::read_to_string(out.join("gpu-bench.log")).unwrap();
     assert!(log.contains("run.sh: bench gpu exited with 0"), "{log}");
+    let has_loader = Command::new("sh")
+        .args(["-c", "ldconfig -p | grep 'libvulkan\\.so\\.1'"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if has_loader {
+        assert!(!log.contains("unpacking"), "{log}");
+    }
     out.join("gpu-bench.json")
 }
 

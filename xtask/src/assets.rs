@@ -66,9 +66,11 @@ pub fn unpacked() -> anyhow::Result<PathBuf> {
     Ok(dir)
 }
 
-/// Points `gb_core::assets_dir` at the embedded assets, unless `$GB_ASSETS` is set.
+/// Points `gb_core::assets_dir` at the embedded assets, unless `$GB_ASSETS` is set or the
+/// command was built without them (the `embed-assets` feature off: `gb_core::assets_dir`
+/// then names `$GB_ASSETS` or the source tree's `assets/`).
 pub fn install() -> anyhow::Result<()> {
-    if std::env::var_os("GB_ASSETS").is_some() {
+    if std::env::var_os("GB_ASSETS").is_some() || embedded::FILES.is_empty() {
         return Ok(());
     }
     gb_core::assets::use_assets_dir(unpacked()?);

@@ -15,7 +15,15 @@
 //!   runs it from;
 //! - `run.sh`: unpacks all of it and runs `bench gpu --no-setup` from the bundle folder, with
 //!   the report under `$OUT`, so nothing of the source tree is needed there;
-//! - `manifest.json`: what is in it, from which binary, and the sizes.
+//! - `manifest.json`: what is in it, from which binary, and the sizes;
+//! - `assets/` with `--with-assets` only: the built-in assets, for a binary built without
+//!   them (`--no-default-features`, what the lent machine gets: see below) that runs away
+//!   from the repository. `run.sh` points `$GB_ASSETS` at this copy, else at the
+//!   repository's `assets/` beside the bundle.
+//!
+//! The binary to carry is built without the embedded assets (xtask's `embed-assets` feature
+//! off), since the tracked tree that travels with the bundle holds `assets/` already: the
+//! two copies would not fit together.
 //!
 //! The working tree that travels (tracked files, and the bundle named in `carry`) must stay
 //! under the device tool's 64 MiB: the bundle is refused with both sizes when it would not.
@@ -50,6 +58,9 @@ pub struct Options {
     pub xz_level: u32,
     /// The most that the tracked tree and the bundle may hold together.
     pub limit_bytes: u64,
+    /// Copies the built-in assets into the bundle, for a binary without them run away from
+    /// the repository (on the lent machine the tracked tree brings `assets/`).
+    pub with_assets: bool,
 }
 
 /// Writes the bundle (module docs) and returns its manifest.
@@ -83,6 +94,9 @@ pub fn prepare(options: &Options) -> anyhow::Result<Value> {
         format!("{REFERENCE_SCRIPT}: cannot copy (run from the repository root)")
     })?;
 
+    if options.with_assets {
+        copy_tree(&gb_core::assets::assets_dir(), &dir.join("assets"))?;
+    }
     let bundle_bytes = folder_bytes(dir)?;
     let tree_bytes = tracked_tree_bytes();
     let manifest = json!({
@@ -99,6 +113,7 @@ pub fn prepare(options: &Options) -> anyhow::Result<Value> {
         "bundle_bytes": bundle_bytes,
         "tracked_tree_bytes": tree_bytes,
         "carry_limit_bytes": options.limit_bytes,
+        "assets_in_bundle": options.with_assets,
     });
     write_file(
         &dir.join("manifest.json"),
@@ -119,7 +134,8 @@ pub fn prepare(options: &Options) -> anyhow::Result<Value> {
     if !cfg!(feature = "vulkan") {
         tracing::warn!(
             "this gb-nerf was built without the `vulkan` feature: the GPU runs WGSL kernels, \
-             not SPIR-V with tensor cores (cargo build --release -p xtask --features vulkan)"
+             not SPIR-V with tensor cores (cargo build --release -p xtask --no-default-features \
+             --features vulkan)"
         );
     }
     if cfg!(debug_assertions) {
@@ -163,7 +179,9 @@ say() { echo "run.sh: $*" | tee -a "$log" >&2; }
 
 # 1. The Vulkan loader, unless the machine has one; the NVIDIA driver's ICD when the
 #    loader would not find it by itself.
-if ! ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1'; then
+# (grep reads all of ldconfig's output: with -q it would stop early, and pipefail would then
+# count ldconfig's broken pipe as no loader)
+if ! ldconfig -p 2>/dev/null | grep 'libvulkan\.so\.1' > /dev/null; then
     for f in "$bundle"/debs/*.deb; do
         [ -e "$f" ] || continue
         say "unpacking $(basename "$f") into /"
@@ -174,6 +192,18 @@ fi
 icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
 if [ -z "${VK_DRIVER_FILES:-}" ] && [ -f "$icd" ]; then
     export VK_DRIVER_FILES="$icd"
+fi
+
+# The built-in assets (the tiny prior, the tokenizer) for a binary built without them: the
+# bundle's own copy (--with-assets), else the repository's beside the bundle.
+if [ -z "${GB_ASSETS:-}" ]; then
+    for d in "$bundle/assets" "$bundle/../assets"; do
+        if [ -f "$d/tiny-prior/model_index.json" ]; then
+            GB_ASSETS="$(cd "$d" && pwd)"
+            export GB_ASSETS
+            break
+        fi
+    done
 fi
 
 # 2. The binary.
@@ -364,6 +394,31 @@ fn copy_files(from: &Path, to: &Path, ext: &str, flag: &str) -> anyhow::Result<V
         }
     }
     file_names(to, ext)
+}
+
+/// Copies the folder `from` into `to`, recursively (links stay links on Unix).
+fn copy_tree(from: &Path, to: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(to).with_context(|| format!("{}: cannot create", to.display()))?;
+    let entries =
+        std::fs::read_dir(from).with_context(|| format!("{}: cannot read", from.display()))?;
+    for entry in entries {
+        let entry = entry?;
+        let target = to.join(entry.file_name());
+        #[cfg(unix)]
+        if entry.file_type()?.is_symlink() {
+            // assets/tiny-prior/tokenizer -> ../clip-tokenizer: kept a link, as in the tree
+            std::os::unix::fs::symlink(std::fs::read_link(entry.path())?, &target)
+                .with_context(|| format!("{}: cannot link", target.display()))?;
+            continue;
+        }
+        if std::fs::metadata(entry.path())?.is_dir() {
+            copy_tree(&entry.path(), &target)?;
+        } else {
+            std::fs::copy(entry.path(), &target)
+                .with_context(|| format!("{}: cannot copy", entry.path().display()))?;
+        }
+    }
+    Ok(())
 }
 
 /// The sorted names of the `*.ext` files in `dir`.

@@ -101,6 +101,10 @@ pub struct Args {
     /// device tool carries 64).
     #[arg(long, default_value_t = 64, value_name = "MIB", requires = "prepare")]
     pub carry_limit_mib: u64,
+    /// With --prepare: copies the built-in assets into the bundle, so that a binary built
+    /// without them (`--no-default-features`) runs from the bundle alone.
+    #[arg(long, requires = "prepare")]
+    pub with_assets: bool,
 }
 
 /// Runs the benchmark, or with `--prepare` writes the bundle (see the module docs).
@@ -113,6 +117,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             wheels: args.wheels.clone(),
             xz_level: args.xz_level,
             limit_bytes: args.carry_limit_mib << 20,
+            with_assets: args.with_assets,
         };
         let manifest = bundle::prepare(&options)?;
         println!("{}", bundle::device_instructions(dir, &manifest));
