@@ -235,27 +235,14 @@ fn the_finetune_jobs_run_the_command_line_over_mpi() {
         Some("registry.example/gb-nerf:mpi")
     );
     let command = launcher.command.clone().unwrap();
-    let expected: Vec<String> = [
-        "mpirun",
-        "-n",
-        "2",
-        "-x",
-        "RAYON_NUM_THREADS",
-        "gb-nerf",
-        "finetune",
-        "--synthetic",
-        "--base",
-        "tiny",
-        "--steps",
-        "3",
-        "--out",
-        s(&out),
-        "--data-parallel",
-        "mpi",
-    ]
-    .iter()
-    .map(|a| a.to_string())
-    .collect();
+    // the command line before --emit, run by mpirun over the ranks
+    let expected: Vec<String> = ["mpirun", "-n", "2", "-x", "RAYON_NUM_THREADS", "gb-nerf"]
+        .iter()
+        .chain(&args[..8])
+        .chain(&["--data-parallel", "mpi"])
+        .map(|a| a.to_string())
+        .collect();
+    assert_eq!(&args[7], &s(&out));
     assert_eq!(command, expected);
     let worker = specs.worker.template.spec.unwrap();
     let limits = worker.containers[0]

@@ -50,7 +50,7 @@ fn masked_psnr(a: &RgbImage, b: &RgbImage, hole: &[bool]) -> f64 {
             n += 1;
         }
     }
-    10.0 * (n as f64 / se).log10()
+    gb_core::psnr_from_mse(se / n as f64)
 }
 
 /// `img` with every hole pixel set to the mean colour of the hole's truth (a fill that knows

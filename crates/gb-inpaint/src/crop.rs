@@ -175,7 +175,7 @@ pub struct RenderContext<'a> {
     pub field: &'a NerfField,
     /// How rays are cast, sampled and composited: the trainer's image settings (its chunk
     /// size is not used here).
-    pub rays: ImageSettings<'a>,
+    pub settings: ImageSettings<'a>,
     /// Whether the RGB prior input's graph reaches only the colour head (the method's
     /// `rgb_moves_geometry = false`); the normal map always reaches the geometry.
     pub rgb_appearance_only: bool,
@@ -184,7 +184,7 @@ pub struct RenderContext<'a> {
 impl RenderContext<'_> {
     /// The ray of `camera` through the continuous pixel `pixel`, within the scene's bounds.
     pub fn ray_through(&self, camera: &Camera, pixel: [f32; 2]) -> RayBatch {
-        self.rays.rays(camera, &[pixel])
+        self.settings.rays(camera, &[pixel])
     }
 }
 
@@ -260,17 +260,17 @@ fn render_pixels(
     want_normals: bool,
     appearance_only: bool,
 ) -> Result<(Tensor<2>, Tensor<1>, Option<Tensor<2>>), TensorValuesError> {
-    let rays = ctx.rays.rays(camera, pixels);
-    let samples = ctx.rays.samples::<ChaCha8Rng>(ctx.field, &rays, None)?;
+    let rays = ctx.settings.rays(camera, pixels);
+    let samples = ctx.settings.samples::<ChaCha8Rng>(ctx.field, &rays, None)?;
     let out = if appearance_only {
-        render_samples_appearance_only(ctx.field, &samples, ctx.rays.background)
+        render_samples_appearance_only(ctx.field, &samples, ctx.settings.background)
     } else {
-        render_samples(ctx.field, &samples, ctx.rays.background)
+        render_samples(ctx.field, &samples, ctx.settings.background)
     };
-    let normals = match (want_normals, ctx.rays.normals) {
+    let normals = match (want_normals, ctx.settings.normals) {
         (true, NormalSource::DensityGradient { step }) => Some(density_gradient_normals(
             ctx.field,
-            ctx.rays.space,
+            ctx.settings.space,
             &samples,
             out.weights.clone(),
             out.opacity.clone(),
@@ -349,7 +349,7 @@ pub fn render_normal_input(
     let rn = (r / divisor.max(1)).max(4).min(r);
     let camera = g.camera(rn);
     let grid = all_pixels(rn, rn);
-    let want_gradient = matches!(ctx.rays.normals, NormalSource::DensityGradient { .. });
+    let want_gradient = matches!(ctx.settings.normals, NormalSource::DensityGradient { .. });
     let (_, depth, normals) = render_pixels(ctx, &camera, &grid, want_gradient, false)?;
     let plane_fit = |cfg: PlaneFitConfig| {
         depth_to_normals(
@@ -358,7 +358,7 @@ pub fn render_normal_input(
             g.plane_fit_for(cfg, rn),
         )
     };
-    let normals: Tensor<3> = match (ctx.rays.normals, normals) {
+    let normals: Tensor<3> = match (ctx.settings.normals, normals) {
         (NormalSource::DensityGradient { .. }, Some(n)) => n.reshape([rn, rn, 3]),
         (NormalSource::PlaneFit(cfg), _) => plane_fit(cfg),
         // not reached: density-gradient normals are always rendered above

@@ -123,21 +123,21 @@ impl HiddenDepth {
         let mut target = Vec::with_capacity(2 * n);
         for _ in 0..n {
             let p = self.pixels[rng.random_range(0..self.pixels.len())];
-            target.extend(disparity_pair(ctx.rays.near, p.depth));
+            target.extend(disparity_pair(ctx.settings.near, p.depth));
             let Some(view) = views.get(p.view) else {
                 return Ok(None);
             };
             rays.append(ctx.ray_through(&view.camera, p.pixel));
         }
-        let samples = ctx.rays.samples(ctx.field, &rays, Some(&mut rng))?;
-        let out = render_samples(ctx.field, &samples, ctx.rays.background);
+        let samples = ctx.settings.samples(ctx.field, &rays, Some(&mut rng))?;
+        let out = render_samples(ctx.field, &samples, ctx.settings.background);
         let mut loss = Tensor::<1>::zeros([1], &ctx.field.device());
         if self.config.depth_weight > 0.0 {
-            let d = disparity_toward(out.disparity, target, ctx.rays.near);
+            let d = disparity_toward(out.disparity, target, ctx.settings.near);
             loss = loss + d.mul_scalar(self.config.depth_weight);
         }
         if self.config.distortion_weight > 0.0 {
-            let dl = distortion_of(out.weights, &rays, &samples, ctx.rays.space.spacing());
+            let dl = distortion_of(out.weights, &rays, &samples, ctx.settings.space.spacing());
             loss = loss + dl.mul_scalar(self.config.distortion_weight);
         }
         Ok(Some(loss))

@@ -182,7 +182,7 @@ impl ObservedMap {
         let grid = all_pixels(rv, rv);
         let pixels: Vec<[f32; 2]> = geometry.masked.iter().map(|&i| grid[i]).collect();
         let field = ctx.field.valid();
-        let rays = ctx.rays.rays(&camera, &pixels);
+        let rays = ctx.settings.rays(&camera, &pixels);
         let depth = render_depth(&field, ctx, &rays)?;
         let points: Vec<[f32; 3]> = (0..pixels.len())
             .map(|k| {
@@ -281,7 +281,7 @@ pub(crate) fn observed_points(
             owner.push(k);
             expected.push(z);
         }
-        let r = ctx.rays.rays(cam, &px_list);
+        let r = ctx.settings.rays(cam, &px_list);
         seen.extend(render_depth(field, ctx, &r)?);
     }
     let mut hit = vec![false; points.len()];
@@ -312,11 +312,11 @@ pub(crate) fn render_depth(
         };
         let (o, _) = render_rays::<ChaCha8Rng>(
             field,
-            ctx.rays.space,
+            ctx.settings.space,
             &chunk,
-            ctx.rays.samples_per_ray,
-            ctx.rays.occupancy,
-            ctx.rays.background,
+            ctx.settings.samples_per_ray,
+            ctx.settings.occupancy,
+            ctx.settings.background,
             None,
         )?;
         out.extend(f32_values(o.depth.into_data(), "visibility depth")?);

@@ -222,8 +222,8 @@ pub(super) fn nerf_speed(sizes: &Sizes, kind: BackendKind) -> anyhow::Result<Val
 }
 
 /// `tools/bench/unet_bench.py` on the GPU (`--device cuda --fp16`): U-Net fp32 and fp16 and
-/// the VAE encoder; on failure the object says why.
-pub(super) fn diffusers_reference(python: &Path, sizes: &Sizes) -> Value {
+/// the VAE encoder.
+pub(super) fn diffusers_reference(python: &Path, sizes: &Sizes) -> anyhow::Result<Value> {
     let out = Command::new(python)
         .arg("tools/bench/unet_bench.py")
         .args(["--latent", &sizes.latent.to_string(), "--batch", "2"])
@@ -235,15 +235,17 @@ pub(super) fn diffusers_reference(python: &Path, sizes: &Sizes) -> Value {
             "--fp16",
         ])
         .args(["--vae-sizes", &sizes.vae_side.to_string()])
-        .output();
-    match out {
-        Ok(out) if out.status.success() => {
-            let text = String::from_utf8_lossy(&out.stdout);
-            serde_json::from_str(text.lines().last().unwrap_or(""))
-                .unwrap_or_else(|e| json!({ "error": format!("unparsable output: {e}") }))
-        }
-        Ok(out) => json!({ "error": String::from_utf8_lossy(&out.stderr)
-            .lines().last().unwrap_or("failed").to_string() }),
-        Err(e) => json!({ "error": format!("{}: {e}", python.display()) }),
+        .output()
+        .with_context(|| format!("{}: cannot start", python.display()))?;
+    if !out.status.success() {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        anyhow::bail!(
+            "{} tools/bench/unet_bench.py: {}",
+            python.display(),
+            stderr.lines().last().unwrap_or("failed")
+        );
     }
+    let text = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(text.lines().last().unwrap_or(""))
+        .context("tools/bench/unet_bench.py: unparsable output")
 }

@@ -15,6 +15,7 @@ use serde_json::{json, Map, Value};
 pub(super) struct StagedReport {
     path: PathBuf,
     doc: Map<String, Value>,
+    stages: Map<String, Value>,
     started: Instant,
     budget: Duration,
 }
@@ -27,11 +28,11 @@ impl StagedReport {
             Value::Object(m) => m,
             other => Map::from_iter([("head".to_string(), other)]),
         };
-        doc.insert("stages".into(), Value::Object(Map::new()));
         doc.insert("budget_s".into(), json!(budget.as_secs_f64()));
         Self {
             path,
             doc,
+            stages: Map::new(),
             started: Instant::now(),
             budget,
         }
@@ -98,9 +99,7 @@ impl StagedReport {
 
     /// Sets the entry of stage `name` and writes the report.
     fn record(&mut self, name: &str, entry: Value) {
-        if let Some(Value::Object(stages)) = self.doc.get_mut("stages") {
-            stages.insert(name.to_string(), entry);
-        }
+        self.stages.insert(name.to_string(), entry);
         if let Err(e) = self.write() {
             tracing::warn!("{e:#}");
         }
@@ -111,19 +110,11 @@ impl StagedReport {
         self.doc.insert(key.to_string(), value);
     }
 
-    /// The stages' entries so far.
-    pub(super) fn stages(&self) -> &Map<String, Value> {
-        match self.doc.get("stages") {
-            Some(Value::Object(m)) => m,
-            _ => unreachable!("`stages` is set in new() and only replaced by stage()"),
-        }
-    }
-
     /// Records the total wall time and writes the report a last time, printing it.
     pub(super) fn finish(mut self) -> anyhow::Result<PathBuf> {
         self.set("wall_s", json!(self.started.elapsed().as_secs_f64()));
         let mut failed: Vec<&String> = self
-            .stages()
+            .stages
             .iter()
             .filter(|(_, v)| v.get("error").is_some() || v.get("skipped").is_some())
             .map(|(k, _)| k)
@@ -138,7 +129,14 @@ impl StagedReport {
             .context("--out names no file")?
             .to_string_lossy()
             .into_owned();
-        crate::write_report(dir, &file, &Value::Object(self.doc))
+        crate::write_report(dir, &file, &self.document())
+    }
+
+    /// The report as written: the fields, and the stages under `stages`.
+    fn document(&self) -> Value {
+        let mut doc = self.doc.clone();
+        doc.insert("stages".into(), Value::Object(self.stages.clone()));
+        Value::Object(doc)
     }
 
     fn write(&self) -> anyhow::Result<()> {
@@ -146,7 +144,7 @@ impl StagedReport {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("{}: cannot create", dir.display()))?;
         }
-        let text = serde_json::to_string_pretty(&Value::Object(self.doc.clone()))? + "\n";
+        let text = serde_json::to_string_pretty(&self.document())? + "\n";
         gb_core::write_atomic(&self.path, text.as_bytes())
             .with_context(|| format!("{}: cannot write", self.path.display()))
     }

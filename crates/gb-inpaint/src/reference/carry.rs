@@ -92,7 +92,7 @@ fn reference_depth(
         .iter()
         .map(|[x, y]| [*x as f32 + 0.5, *y as f32 + 0.5])
         .collect();
-    let rays = ctx.rays.rays(cam, &px);
+    let rays = ctx.settings.rays(cam, &px);
     let depth = render_depth(field, ctx, &rays)?;
     let mut map = vec![f32::NAN; cam.width * cam.height];
     for ([x, y], d) in r.pixels.iter().zip(depth) {
@@ -150,7 +150,7 @@ pub fn carry(
             .iter()
             .map(|[x, y]| [*x as f32 + 0.5, *y as f32 + 0.5])
             .collect();
-        let rays = ctx.rays.rays(&view.camera, &px);
+        let rays = ctx.settings.rays(&view.camera, &px);
         let depth = render_depth(&field, ctx, &rays)?;
         tested.push(TestedView {
             view: j,

@@ -297,7 +297,7 @@ impl ReferenceState {
                     .unwrap_or(0.0);
                 (r.view, x, y, r.image.get(x as usize, y as usize), depth)
             };
-            anchor.extend(disparity_pair(ctx.rays.near, depth));
+            anchor.extend(disparity_pair(ctx.settings.near, depth));
             let px = [x as f32 + 0.5, y as f32 + 0.5];
             let Some(v) = views.get(view) else {
                 return Ok(None);
@@ -306,17 +306,17 @@ impl ReferenceState {
             target.extend_from_slice(&rgb);
         }
         let device = ctx.field.device();
-        let samples = ctx.rays.samples(ctx.field, &rays, Some(&mut rng))?;
+        let samples = ctx.settings.samples(ctx.field, &rays, Some(&mut rng))?;
         let out = if self.config.shapes_geometry {
-            render_samples(ctx.field, &samples, ctx.rays.background)
+            render_samples(ctx.field, &samples, ctx.settings.background)
         } else {
-            render_samples_fixed_geometry(ctx.field, &samples, ctx.rays.background)
+            render_samples_fixed_geometry(ctx.field, &samples, ctx.settings.background)
         };
         let target = Tensor::<2>::from_data(TensorData::new(target, [n, 3]), &device);
         let diff = out.rgb - target;
         let mut loss = (diff.clone() * diff).mean().mul_scalar(self.config.weight);
         if self.config.anchor_weight > 0.0 {
-            let d = disparity_toward(out.disparity, anchor, ctx.rays.near);
+            let d = disparity_toward(out.disparity, anchor, ctx.settings.near);
             loss = loss + d.mul_scalar(self.config.anchor_weight);
         }
         Ok(Some(ReferenceTerm {

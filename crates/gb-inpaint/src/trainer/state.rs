@@ -198,7 +198,7 @@ impl GuidedTrainer {
     pub(super) fn render_context(&self) -> RenderContext<'_> {
         RenderContext {
             field: &self.nerf.field,
-            rays: self.nerf.image_settings(),
+            settings: self.nerf.image_settings(),
             rgb_appearance_only: !self.method.rgb_moves_geometry,
         }
     }
