@@ -9,6 +9,8 @@
 //!    sparse-point losses of every training view, so no view sees them, like the real hole;
 //!    the first where the ring around its image looks most like the ring around the object's
 //!    mask ([`resemblance`]), up to `[auto] holes` of them on different surfaces;
+//!    the surfaces are the scene's COLMAP points or depth maps, else (a capture with
+//!    neither) a short unguided [`scout`] field's rendered depth;
 //! 2. one short **trial** per candidate (the product of `[auto] rgb` and `[auto] normal` over
 //!    the weights that are `"auto"`; the others keep their value) trains the method on the
 //!    scene with the object's masks withheld too and the pseudo-holes as the guided hole. The
@@ -45,6 +47,7 @@
 pub mod pseudo_hole;
 pub mod resemblance;
 mod score;
+pub mod scout;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -57,6 +60,7 @@ use serde::{Deserialize, Serialize};
 
 pub use crate::method::{AutoSettings, Weight};
 pub use pseudo_hole::{PlacedHole, PseudoHole};
+pub use scout::SurfaceSource;
 
 use crate::error::InpaintError;
 use crate::geometry::HiddenDepth;
@@ -126,6 +130,10 @@ pub struct AutoReport {
     /// Wall time of the shared prefix, seconds.
     #[serde(default)]
     pub prefix_seconds: f64,
+    /// Where the pseudo-holes' surface points came from: the scene, or a scout field when
+    /// it has neither COLMAP points nor depth maps ([`scout`]).
+    #[serde(default)]
+    pub surface: SurfaceSource,
     /// The metrics that ranked the trials.
     pub ranked_by: Vec<String>,
     /// Every trial, in grid order.
@@ -278,8 +286,27 @@ pub fn choose_weights(
     }
     let started = Instant::now();
     let auto = &i.method.auto;
-    let placed =
-        pseudo_hole::place_holes(i.scene, auto.hole_scale, auto.holes).map_err(auto_err)?;
+    let steps = ((i.config.train.steps as f64 * auto.trial_steps).round() as usize).max(1);
+    let prefix_steps = ((steps as f64 * auto.prefix).round() as usize).min(steps - 1);
+    let (scouted, surface) = if scout::has_surface(i.scene) {
+        (None, SurfaceSource::Scene)
+    } else {
+        // as long as the trials' shared prefix, which is trained as this scout is
+        let (s, source) = scout::scouted(
+            i.scene,
+            i.config,
+            &i.devices,
+            prefix_steps.max(1),
+            i.progress,
+        )?;
+        (Some(s), source)
+    };
+    let placed = pseudo_hole::place_holes(
+        scouted.as_ref().unwrap_or(i.scene),
+        auto.hole_scale,
+        auto.holes,
+    )
+    .map_err(auto_err)?;
     let f = i.config.train.image_downscale.max(1);
     let each: Vec<Vec<Option<Mask>>> = placed
         .iter()
@@ -304,7 +331,6 @@ pub fn choose_weights(
         .map(|t| t.mask.iter().filter(|b| **b).count())
         .sum();
     let withheld_views = holes.iter().filter(|h| h.is_some()).count();
-    let steps = ((i.config.train.steps as f64 * i.method.auto.trial_steps).round() as usize).max(1);
     for p in &placed {
         tracing::info!(
             hole = ?p.hole,
@@ -321,7 +347,6 @@ pub fn choose_weights(
         "auto weights: pseudo-holes withheld"
     );
     let prefix_start = Instant::now();
-    let prefix_steps = ((steps as f64 * auto.prefix).round() as usize).min(steps - 1);
     let (prefix, hold) = if prefix_steps > 0 {
         let path = dir.join(PREFIX_FILE);
         std::fs::create_dir_all(&dir).map_err(|e| InpaintError::io(&dir, e))?;
@@ -369,6 +394,7 @@ pub fn choose_weights(
         trial_steps: steps,
         prefix_steps,
         prefix_seconds,
+        surface,
         ranked_by,
         lambda_rgb: trials[best].lambda_rgb,
         lambda_normal: trials[best].lambda_normal,

@@ -1,0 +1,117 @@
+//! Surface points for the pseudo-holes of a scene that brings none.
+//!
+//! The pseudo-holes sit on observed surfaces ([`super::pseudo_hole`]), found from the
+//! scene's COLMAP points or its depth maps. A real capture may have neither: SPIn-NeRF's
+//! `statue` ships LLFF poses without `sparse/0`. Then a short unguided **scout** field is
+//! trained on the scene (the object's masks withheld, as `--method none` trains), and its
+//! rendered depth at every [`STRIDE`]th pixel of each training view, where the ray is opaque
+//! and outside the mask, becomes the scene's sparse points for the placement only. The run
+//! and the trials never see these points.
+
+use std::time::Instant;
+
+use gb_core::Devices;
+use gb_nerf::scene::colmap::SparseDepth;
+use gb_nerf::scene::{Scene, Split, View};
+use gb_nerf::train::{DepthSupervision, NerfConfig, Trainer};
+use serde::{Deserialize, Serialize};
+
+use crate::error::InpaintError;
+
+/// Pixels between the scout's depth samples, in both directions (as the depth-map points of
+/// [`super::pseudo_hole`]).
+pub const STRIDE: usize = 8;
+/// The least accumulated opacity of a ray whose depth is a surface point.
+pub const MIN_OPACITY: f32 = 0.5;
+
+/// Where the pseudo-holes' surface points came from (`metrics.json`'s `auto.surface`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case", tag = "from")]
+pub enum SurfaceSource {
+    /// The scene's COLMAP points or depth maps.
+    #[default]
+    Scene,
+    /// A scout field's rendered depth (module docs).
+    Scout {
+        /// Its training steps.
+        steps: usize,
+        /// The surface points it gave.
+        points: usize,
+        /// Its wall time (training and the depth renders), seconds.
+        seconds: f64,
+    },
+}
+
+/// Whether `scene` brings surface points of its own: sparse points or depth maps of its
+/// training views.
+pub fn has_surface(scene: &Scene) -> bool {
+    let train: Vec<&View> = scene.split(Split::Train).collect();
+    train.iter().any(|v| {
+        v.depth.is_some()
+            || scene
+                .sparse_depth
+                .get(&v.name)
+                .is_some_and(|p| !p.is_empty())
+    })
+}
+
+/// `scene` with the scout field's depth as the sparse points of its training views (module
+/// docs): a field of `config` trained `steps` steps on colour alone, on `devices`.
+pub fn scouted(
+    scene: &Scene,
+    config: &NerfConfig,
+    devices: &Devices,
+    steps: usize,
+    progress: bool,
+) -> Result<(Scene, SurfaceSource), InpaintError> {
+    let start = Instant::now();
+    let mut config = config.clone();
+    config.train.steps = steps.max(1);
+    config.train.depth = DepthSupervision::None;
+    let mut trainer = Trainer::new(scene, config, devices.clone())?;
+    trainer.fit(None, progress)?;
+    let mut out = scene.clone();
+    let mut points = 0;
+    for view in scene.split(Split::Train) {
+        let pixels = grid_outside_mask(view);
+        let profiles = trainer.ray_profiles(&view.camera, &pixels)?;
+        let found: Vec<SparseDepth> = profiles
+            .iter()
+            .filter(|p| p.opacity >= MIN_OPACITY && p.depth.is_finite() && p.depth > 0.0)
+            .map(|p| SparseDepth {
+                x: p.pixel[0],
+                y: p.pixel[1],
+                depth: p.depth,
+                error: 0.0,
+            })
+            .collect();
+        points += found.len();
+        out.sparse_depth.insert(view.name.clone(), found);
+    }
+    let source = SurfaceSource::Scout {
+        steps: steps.max(1),
+        points,
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    tracing::info!(?source, "auto weights: surface points from a scout field");
+    Ok((out, source))
+}
+
+/// Pixel centres every [`STRIDE`] pixels of `view`, outside its mask.
+fn grid_outside_mask(view: &View) -> Vec<[f32; 2]> {
+    let (w, h) = (view.image.width, view.image.height);
+    let half = STRIDE / 2;
+    let mut out = Vec::new();
+    for y in (half..h).step_by(STRIDE) {
+        for x in (half..w).step_by(STRIDE) {
+            let masked = view
+                .mask
+                .as_ref()
+                .is_some_and(|m| x < m.width && y < m.height && m.data[y * m.width + x]);
+            if !masked {
+                out.push([x as f32 + 0.5, y as f32 + 0.5]);
+            }
+        }
+    }
+    out
+}
