@@ -6,26 +6,10 @@ use std::path::Path;
 
 use gb_tests::{workspace_root, xtask};
 
-/// A little-endian f32 `.npy` (format 1.0).
+/// A little-endian f32 `.npy`.
 fn write_npy(path: &Path, shape: &[usize], data: &[f32]) {
-    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-    let shape_txt = if dims.len() == 1 {
-        format!("({},)", dims[0])
-    } else {
-        format!("({})", dims.join(", "))
-    };
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_txt}, }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
-    for v in data {
-        bytes.extend_from_slice(&v.to_le_bytes());
-    }
-    std::fs::write(path, bytes).unwrap();
+    let shape: Vec<u64> = shape.iter().map(|&d| d as u64).collect();
+    std::fs::write(path, gb_core::npy::encode_f32(&shape, data).unwrap()).unwrap();
 }
 
 /// One DIODE scan with `n` images of a tilted plane.

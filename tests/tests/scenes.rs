@@ -163,26 +163,10 @@ fn same_seed_same_bytes_through_the_cli() {
     assert_ne!(poses(&a), poses(&c));
 }
 
-/// A minimal `.npy` writer (float64, C order), so this crate needs no npy dependency.
+/// A float64 C-order `.npy`.
 fn npy_f64(shape: &[usize], data: &[f64]) -> Vec<u8> {
-    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-    let shape_str = if dims.len() == 1 {
-        format!("({},)", dims[0])
-    } else {
-        format!("({})", dims.join(", "))
-    };
-    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape_str}, }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    for v in data {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    out
+    let shape: Vec<u64> = shape.iter().map(|&d| d as u64).collect();
+    gb_core::npy::encode_f64(&shape, data).unwrap()
 }
 
 fn copy_dir(from: &Path, to: &Path) {

@@ -159,22 +159,28 @@ pub fn encode_f32(shape: &[u64], data: &[f32]) -> std::io::Result<Vec<u8>> {
     encode(shape, data)
 }
 
+/// The bytes of a version 1.0 `.npy` file with the header dictionary `dict` (padded as
+/// numpy pads it) and the raw `data` after it, unchecked: for fixtures and tests that need a
+/// header of their own (another dtype, Fortran order, a shape the data does not fill).
+pub fn encode_raw(dict: &str, data: &[u8]) -> Vec<u8> {
+    let mut text = dict.to_string();
+    while !(10 + text.len() + 1).is_multiple_of(64) {
+        text.push(' ');
+    }
+    text.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend((text.len() as u16).to_le_bytes());
+    out.extend(text.bytes());
+    out.extend(data);
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// A version 1.0 file with `dict` as its header and `data` after it.
     fn npy(dict: &str, data: &[u8]) -> Vec<u8> {
-        let mut text = dict.to_string();
-        while !(10 + text.len() + 1).is_multiple_of(64) {
-            text.push(' ');
-        }
-        text.push('\n');
-        let mut out = b"\x93NUMPY\x01\x00".to_vec();
-        out.extend((text.len() as u16).to_le_bytes());
-        out.extend(text.bytes());
-        out.extend(data);
-        out
+        encode_raw(dict, data)
     }
 
     #[test]

@@ -229,19 +229,7 @@ mod tests {
         assert_eq!(d_psnr(&a, &b, &Region::Full).unwrap(), f64::INFINITY);
     }
 
-    /// `.npy` bytes (version 1.0) with `header` as the dictionary and `data` after it.
-    fn npy(header: &str, data: &[u8]) -> Vec<u8> {
-        let mut text = header.to_string();
-        while !(10 + text.len() + 1).is_multiple_of(64) {
-            text.push(' ');
-        }
-        text.push('\n');
-        let mut out = b"\x93NUMPY\x01\x00".to_vec();
-        out.extend_from_slice(&(text.len() as u16).to_le_bytes());
-        out.extend_from_slice(text.as_bytes());
-        out.extend_from_slice(data);
-        out
-    }
+    use gb_core::npy::encode_raw as npy;
 
     /// Found by `cargo xtask-fuzz`: a Fortran-order map with a zero side and a huge other
     /// side used to loop over the huge side (a hang); it now reads as the empty map it is.

@@ -49,15 +49,10 @@ mod tests {
         std::fs::write(&p, b"nonsense").unwrap();
         let e = read_float_array(&p).unwrap_err().to_string();
         assert!(e.contains("poses_bounds.npy"), "{e}");
-        let mut ints = b"\x93NUMPY\x01\x00".to_vec();
-        let mut dict = "{'descr': '<i4', 'fortran_order': False, 'shape': (1,), }".to_string();
-        while !(10 + dict.len() + 1).is_multiple_of(64) {
-            dict.push(' ');
-        }
-        dict.push('\n');
-        ints.extend((dict.len() as u16).to_le_bytes());
-        ints.extend(dict.bytes());
-        ints.extend(7i32.to_le_bytes());
+        let ints = gb_core::npy::encode_raw(
+            "{'descr': '<i4', 'fortran_order': False, 'shape': (1,), }",
+            &7i32.to_le_bytes(),
+        );
         std::fs::write(&p, ints).unwrap();
         let e = read_float_array(&p).unwrap_err().to_string();
         assert!(
