@@ -373,11 +373,17 @@ pub fn choose_weights(
     }
     let mut trials = trials?;
     let ranked_by = rank(&mut trials);
+    let has_depth_maps = i.scene.split(Split::Train).any(|v| v.depth.is_some());
     let left_out: Vec<&str> = METRICS
         .iter()
         .map(|(k, _)| *k)
         .filter(|k| !ranked_by.iter().any(|r| r == k))
+        // D-PSNR needs the scene's depth maps (module docs): its absence is expected there
+        .filter(|k| has_depth_maps || *k != "d_psnr_bbox")
         .collect();
+    if !has_depth_maps {
+        tracing::info!("auto weights: ranked without D-PSNR (the scene has no depth maps)");
+    }
     if !left_out.is_empty() {
         tracing::warn!(
             ?left_out,
