@@ -27,12 +27,17 @@ fn scene(dir: &Path) -> Scene {
 }
 
 fn scene_of(dir: &Path, name: SceneName, seed: u64) -> Scene {
+    scene_with_views(dir, name, seed, 6)
+}
+
+/// A 128x96 procedural scene of `views` views, one of them a test view.
+fn scene_with_views(dir: &Path, name: SceneName, seed: u64, views: usize) -> Scene {
     let opts = ProceduralOptions {
         name,
         seed,
         width: 128,
         height: 96,
-        views: 6,
+        views,
         test_views: 1,
         dilate: 1,
     };
@@ -335,19 +340,7 @@ fn a_capture_without_points_or_depth_places_its_pseudo_holes_on_a_scout_field() 
     let _lock = LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     // a capture's many views (statue has 29): colour alone pins the surface down
-    let opts = ProceduralOptions {
-        name: SceneName::Stairs,
-        seed: 100,
-        width: 128,
-        height: 96,
-        views: 17,
-        test_views: 1,
-        dilate: 1,
-    };
-    procedural::write(&opts, dir.path()).unwrap();
-    let truth = gb_nerf::scene::load(dir.path(), &LoadOptions::default())
-        .unwrap()
-        .1;
+    let truth = scene_with_views(dir.path(), SceneName::Stairs, 100, 17);
     let mut bare = truth.clone();
     bare.sparse_depth.clear();
     bare.views.iter_mut().for_each(|v| v.depth = None);
