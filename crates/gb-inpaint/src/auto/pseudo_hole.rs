@@ -179,6 +179,13 @@ fn under_mask(view: &View, x: f32, y: f32) -> bool {
     })
 }
 
+/// Whether `scene` has observed surface points to place a pseudo-hole on: sparse points or
+/// depth-map pixels of its training views outside the masks.
+pub fn has_surface_points(scene: &Scene) -> bool {
+    let train: Vec<&View> = scene.split(Split::Train).collect();
+    !surface_points(scene, &train).is_empty()
+}
+
 /// The scene's observed surface points: its sparse points (COLMAP's), else every 8th pixel
 /// of its depth maps, leaving out those under a mask (the object).
 fn surface_points(scene: &Scene, train: &[&View]) -> Vec<[f32; 3]> {

@@ -42,17 +42,10 @@ pub enum SurfaceSource {
     },
 }
 
-/// Whether `scene` brings surface points of its own: sparse points or depth maps of its
-/// training views.
+/// Whether `scene` brings surface points of its own outside the masks: sparse points or
+/// depth maps of its training views ([`super::pseudo_hole::has_surface_points`]).
 pub fn has_surface(scene: &Scene) -> bool {
-    let train: Vec<&View> = scene.split(Split::Train).collect();
-    train.iter().any(|v| {
-        v.depth.is_some()
-            || scene
-                .sparse_depth
-                .get(&v.name)
-                .is_some_and(|p| !p.is_empty())
-    })
+    super::pseudo_hole::has_surface_points(scene)
 }
 
 /// `scene` with the scout field's depth as the sparse points of its training views (module
