@@ -1,9 +1,12 @@
 #!/usr/bin/env python3
 """Issue 47, item 4: the export's cost against the run's own renders, from one run folder.
 
-Reads RUN/metrics.json (training and test-view render times), RUN/config.toml's scene and the
-`export` step of tools/diag/statue_fast.sh's steps.log ("wrote N views (WxH) to ... in S s"),
-and writes OUT.json: seconds per view and per megapixel of both, and their ratio.
+Reads RUN/metrics.json (the scene, the training time and the time of the run's renders of its
+shown views: the test views, or on a capture without them its first three masked training
+views) and the last `export` step of tools/diag/statue_fast.sh's steps.log ("wrote N views
+(WxH) to ... in S s"), and writes OUT.json: seconds per view and per megapixel of both (the
+run's renders are taken at the export's resolution, the training views'), and their ratio.
+The machine recorded is the one this script runs on: run it where the run ran.
 
 Usage: export_cost.py RUN_DIR STEPS_LOG OUT.json
 """
@@ -18,9 +21,10 @@ def main():
     run, log, out = sys.argv[1:4]
     metrics = json.load(open(os.path.join(run, "metrics.json")))
     text = open(log).read()
-    m = re.search(r"wrote (\d+) views \((\d+)x(\d+)\) to \S+ in ([0-9.]+) s", text)
-    if not m:
+    found = re.findall(r"wrote (\d+) views \((\d+)x(\d+)\) to \S+ in ([0-9.]+) s", text)
+    if not found:
         sys.exit(f"{log}: no 'wrote N views' line of the export step")
+    m = (None,) + found[-1]
     views, w, h, seconds = int(m[1]), int(m[2]), int(m[3]), float(m[4])
     shown = metrics["eval"]["n_images"]
     render = metrics["render_seconds"]
@@ -46,14 +50,14 @@ def main():
         "reference_run_renders": {"views": shown, "seconds": render,
                                   "seconds_per_view": render_view,
                                   "seconds_per_megapixel": render_view / mpx},
-        "export_over_render_per_pixel": export_view / render_view,
+        "export_over_render_per_megapixel": export_view / render_view,
         "export_over_training": seconds / metrics["train_seconds_this_run"],
     }
     with open(out, "w") as f:
         json.dump(report, f, indent=1)
         f.write("\n")
     print(json.dumps({k: report[k] for k in
-                      ("export_over_render_per_pixel", "export_over_training")}))
+                      ("export_over_render_per_megapixel", "export_over_training")}))
 
 
 if __name__ == "__main__":

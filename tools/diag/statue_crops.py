@@ -36,9 +36,15 @@ def main():
     out, scene, runs = sys.argv[1], sys.argv[2], [a.split("=", 1) for a in sys.argv[3:]]
     rows = []
     for view in VIEWS:
-        mask = cv2.imread(os.path.join(scene, "images_2", "label", view + ".png"), 0)
+        mask_path = os.path.join(scene, "images_2", "label", view + ".png")
+        mask = cv2.imread(mask_path, 0)
+        if mask is None or not (mask > 0).any():
+            sys.exit(f"{mask_path}: no mask, or an empty one")
         y0, y1, x0, x1 = crop_box(mask > 0)
-        capture = cv2.imread(os.path.join(scene, "images_2", view + ".png"))
+        capture_path = os.path.join(scene, "images_2", view + ".png")
+        capture = cv2.imread(capture_path)
+        if capture is None:
+            sys.exit(f"{capture_path}: cannot read the capture")
         cells = [label(capture[y0:y1, x0:x1], "capture")]
         for name, run in runs:
             render = cv2.imread(os.path.join(run, "renders", f"train_{view}_rgb.png"))

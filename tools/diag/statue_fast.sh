@@ -23,10 +23,11 @@ timed() {
     local name="$1"
     shift
     echo "== $name: $* ($(date -u +%FT%TZ))" >>"$log"
-    local start
+    local start rc=0
     start=$(date +%s.%N)
-    "$@" >>"$log" 2>&1
-    echo "== $name: exit 0, wall $(echo "$(date +%s.%N) - $start" | bc) s" >>"$log"
+    "$@" >>"$log" 2>&1 || rc=$?
+    echo "== $name: exit $rc, wall $(echo "$(date +%s.%N) - $start" | bc) s" >>"$log"
+    return "$rc"
 }
 for step in "${steps[@]}"; do
     case "$step" in

@@ -331,8 +331,8 @@ fn the_pseudo_hole_most_like_the_alcove_s_hole_lies_in_the_recess() {
 
 /// A capture with neither COLMAP points nor depth maps (SPIn-NeRF's `statue`) cannot place a
 /// pseudo-hole from its own data; a short unguided scout field's depth stands in. Its points
-/// lie on the true surfaces, and the pseudo-hole placed on them is clear of the masks and shown
-/// by the masked views, as one placed from the scene's own depth.
+/// lie near the true surfaces (colour alone leaves them loose), and the pseudo-holes placed on
+/// them are clear of the masks and shown by the masked views.
 #[test]
 fn a_capture_without_points_or_depth_places_its_pseudo_holes_on_a_scout_field() {
     use gb_inpaint::auto::scout;
@@ -370,12 +370,11 @@ fn a_capture_without_points_or_depth_places_its_pseudo_holes_on_a_scout_field() 
         errors.len(),
         100.0 * within
     );
-    // colour alone leaves the depth loose (measured: median 0.23, 57% within 25%; with the
-    // scene's sparse depth, 80% of the same field's points lie within 15%), but close enough
-    // to find the surfaces
+    // measured: median 0.066, 66% within 25% (colour alone leaves floaters: a long tail); the
+    // rendered depth, which adds the missing opacity at the far bound, gave a median of 0.23
     assert!(errors.len() >= 1000, "{} points", errors.len());
-    assert!(median <= 0.3, "median relative depth error {median}");
-    assert!(within >= 0.45, "{within} of the points within 25%");
+    assert!(median <= 0.1, "median relative depth error {median}");
+    assert!(within >= 0.6, "{within} of the points within 25%");
 
     let placed = pseudo_hole::place_holes(&scouted, 1.0, 2).unwrap();
     for p in &placed {

@@ -9,8 +9,8 @@
 //!    sparse-point losses of every training view, so no view sees them, like the real hole;
 //!    the first where the ring around its image looks most like the ring around the object's
 //!    mask ([`resemblance`]), up to `[auto] holes` of them on different surfaces;
-//!    the surfaces are the scene's COLMAP points or depth maps, else (a capture with
-//!    neither) a short unguided [`scout`] field's rendered depth;
+//!    the surfaces are the scene's COLMAP points or depth maps outside the masks, else (a
+//!    capture with neither) a short unguided [`scout`] field's depth;
 //! 2. one short **trial** per candidate (the product of `[auto] rgb` and `[auto] normal` over
 //!    the weights that are `"auto"`; the others keep their value) trains the method on the
 //!    scene with the object's masks withheld too and the pseudo-holes as the guided hole. The
@@ -131,7 +131,7 @@ pub struct AutoReport {
     #[serde(default)]
     pub prefix_seconds: f64,
     /// Where the pseudo-holes' surface points came from: the scene, or a scout field when
-    /// it has neither COLMAP points nor depth maps ([`scout`]).
+    /// it has neither COLMAP points nor depth maps outside the masks ([`scout`]).
     #[serde(default)]
     pub surface: SurfaceSource,
     /// The metrics that ranked the trials.
@@ -291,14 +291,10 @@ pub fn choose_weights(
     let (scouted, surface) = if scout::has_surface(i.scene) {
         (None, SurfaceSource::Scene)
     } else {
-        // as long as the trials' shared prefix, which is trained as this scout is
-        let (s, source) = scout::scouted(
-            i.scene,
-            i.config,
-            &i.devices,
-            prefix_steps.max(1),
-            i.progress,
-        )?;
+        // as long as the trials' shared prefix, which is trained as this scout is, and at
+        // least half a trial
+        let scout_steps = prefix_steps.max(steps / 2).max(1);
+        let (s, source) = scout::scouted(i.scene, i.config, &i.devices, scout_steps, i.progress)?;
         (Some(s), source)
     };
     let placed = pseudo_hole::place_holes(

@@ -4,9 +4,10 @@
 //! scene's COLMAP points or its depth maps. A real capture may have neither: SPIn-NeRF's
 //! `statue` ships LLFF poses without `sparse/0`. Then a short unguided **scout** field is
 //! trained on the scene (the object's masks withheld, as `--method none` trains), and its
-//! rendered depth at every [`STRIDE`]th pixel of each training view, where the ray is opaque
-//! and outside the mask, becomes the scene's sparse points for the placement only. The run
-//! and the trials never see these points.
+//! depth at every [`STRIDE`]th pixel of each training view, where the ray is opaque and
+//! outside the mask, becomes the scene's sparse points for the placement only. The depth is
+//! the weights' mean sample depth, not the rendered depth, which adds the missing opacity at
+//! the far bound. The run and the trials never see these points.
 
 use std::time::Instant;
 
@@ -70,16 +71,29 @@ pub fn scouted(
         let profiles = trainer.ray_profiles(&view.camera, &pixels)?;
         let found: Vec<SparseDepth> = profiles
             .iter()
-            .filter(|p| p.opacity >= MIN_OPACITY && p.depth.is_finite() && p.depth > 0.0)
-            .map(|p| SparseDepth {
-                x: p.pixel[0],
-                y: p.pixel[1],
-                depth: p.depth,
-                error: 0.0,
+            .filter(|p| p.opacity >= MIN_OPACITY)
+            .filter_map(|p| {
+                let depth = surface_depth(&p.t, &p.weights)?;
+                Some(SparseDepth {
+                    x: p.pixel[0],
+                    y: p.pixel[1],
+                    depth,
+                    error: 0.0,
+                })
             })
             .collect();
         points += found.len();
         out.sparse_depth.insert(view.name.clone(), found);
+    }
+    if points == 0 {
+        return Err(InpaintError::Spec {
+            field: "lambda_rgb / lambda_normal = \"auto\"".into(),
+            reason: format!(
+                "the scene has no COLMAP points or depth maps outside the masks, and a scout \
+                 field of {} steps rendered no opaque surface there to place a pseudo-hole on",
+                steps.max(1)
+            ),
+        });
     }
     let source = SurfaceSource::Scout {
         steps: steps.max(1),
@@ -88,6 +102,14 @@ pub fn scouted(
     };
     tracing::info!(?source, "auto weights: surface points from a scout field");
     Ok((out, source))
+}
+
+/// The weights' mean of the sample depths `t` (`None` for a ray that hits nothing or a
+/// non-finite result).
+fn surface_depth(t: &[f32], weights: &[f32]) -> Option<f32> {
+    let total: f32 = weights.iter().sum();
+    let depth = t.iter().zip(weights).map(|(t, w)| t * w).sum::<f32>() / total;
+    (total > 0.0 && depth.is_finite() && depth > 0.0).then_some(depth)
 }
 
 /// Pixel centres every [`STRIDE`] pixels of `view`, outside its mask.
