@@ -202,17 +202,34 @@ fn surface_points(scene: &Scene, train: &[&View]) -> Vec<[f32; 3]> {
     }
     for v in train {
         let Some(depth) = &v.depth else { continue };
-        let w = v.image.width;
-        for y in (4..v.image.height).step_by(8) {
-            for x in (4..w).step_by(8) {
-                let (px, py, z) = (x as f32 + 0.5, y as f32 + 0.5, depth[y * w + x]);
-                if z.is_finite() && z > 0.0 && !under_mask(v, px, py) {
-                    out.push(v.camera.unproject(px, py, z));
-                }
+        for [px, py] in grid_outside_mask(v) {
+            let z = depth[py as usize * v.image.width + px as usize];
+            if z.is_finite() && z > 0.0 {
+                out.push(v.camera.unproject(px, py, z));
             }
         }
     }
     out
+}
+
+/// Pixels between the surface points read from a depth map (or a scout field's depth), in
+/// both directions.
+pub const SURFACE_STRIDE: usize = 8;
+
+/// Pixel centres every [`SURFACE_STRIDE`] pixels of `view`, outside its mask: where its
+/// surface points are read.
+pub(super) fn grid_outside_mask(view: &View) -> Vec<[f32; 2]> {
+    let (w, h) = (view.image.width, view.image.height);
+    let half = SURFACE_STRIDE / 2;
+    (half..h)
+        .step_by(SURFACE_STRIDE)
+        .flat_map(|y| {
+            (half..w)
+                .step_by(SURFACE_STRIDE)
+                .map(move |x| [x as f32 + 0.5, y as f32 + 0.5])
+        })
+        .filter(|&[px, py]| !under_mask(view, px, py))
+        .collect()
 }
 
 /// Summed-area table of a mask, `(w + 1) * (h + 1)`.

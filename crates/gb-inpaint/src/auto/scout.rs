@@ -4,8 +4,9 @@
 //! scene's COLMAP points or its depth maps. A real capture may have neither: SPIn-NeRF's
 //! `statue` ships LLFF poses without `sparse/0`. Then a short unguided **scout** field is
 //! trained on the scene (the object's masks withheld, as `--method none` trains), and its
-//! depth at every [`STRIDE`]th pixel of each training view, where the ray is opaque and
-//! outside the mask, becomes the scene's sparse points for the placement only. The depth is
+//! depth on the grid of [`super::pseudo_hole::SURFACE_STRIDE`] pixels that the depth maps are
+//! read on, where the ray is opaque and outside the mask, becomes the scene's sparse points
+//! for the placement only. The depth is
 //! the weights' mean sample depth, not the rendered depth, which adds the missing opacity at
 //! the far bound. The run and the trials never see these points.
 
@@ -13,15 +14,13 @@ use std::time::Instant;
 
 use gb_core::Devices;
 use gb_nerf::scene::colmap::SparseDepth;
-use gb_nerf::scene::{Scene, Split, View};
+use gb_nerf::scene::{Scene, Split};
 use gb_nerf::train::{DepthSupervision, NerfConfig, Trainer};
 use serde::{Deserialize, Serialize};
 
+use super::pseudo_hole::grid_outside_mask;
 use crate::error::InpaintError;
 
-/// Pixels between the scout's depth samples, in both directions (as the depth-map points of
-/// [`super::pseudo_hole`]).
-pub const STRIDE: usize = 8;
 /// The least accumulated opacity of a ray whose depth is a surface point.
 pub const MIN_OPACITY: f32 = 0.5;
 
@@ -110,23 +109,4 @@ fn surface_depth(t: &[f32], weights: &[f32]) -> Option<f32> {
     let total: f32 = weights.iter().sum();
     let depth = t.iter().zip(weights).map(|(t, w)| t * w).sum::<f32>() / total;
     (total > 0.0 && depth.is_finite() && depth > 0.0).then_some(depth)
-}
-
-/// Pixel centres every [`STRIDE`] pixels of `view`, outside its mask.
-fn grid_outside_mask(view: &View) -> Vec<[f32; 2]> {
-    let (w, h) = (view.image.width, view.image.height);
-    let half = STRIDE / 2;
-    let mut out = Vec::new();
-    for y in (half..h).step_by(STRIDE) {
-        for x in (half..w).step_by(STRIDE) {
-            let masked = view
-                .mask
-                .as_ref()
-                .is_some_and(|m| x < m.width && y < m.height && m.data[y * m.width + x]);
-            if !masked {
-                out.push([x as f32 + 0.5, y as f32 + 0.5]);
-            }
-        }
-    }
-    out
 }
