@@ -10,6 +10,7 @@
 mod assets;
 mod cmd;
 mod default_device;
+mod memory;
 
 use std::io::IsTerminal;
 
@@ -122,8 +123,13 @@ fn usage_error_line(rendered: &str) -> String {
 }
 
 fn main() {
+    let kept = memory::keep_large_blocks();
     default_device::pin_to_command_line();
     init_logging();
+    tracing::debug!(
+        kept,
+        "malloc keeps large freed blocks (xtask/src/memory.rs)"
+    );
     let cli = parse_cli();
     if let Err(e) = assets::install() {
         eprintln!("error: {}", gb_core::messages::one_line(&format!("{e:#}")));
