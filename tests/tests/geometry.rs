@@ -185,3 +185,64 @@ fn an_exact_reference_leaves_the_hidden_wall_at_its_true_depth() {
         100.0 * WALL_WITHIN_5_PERCENT
     );
 }
+
+/// A run that holds the geometry term, given a finished `none` run of the same configuration
+/// as `--baseline`, reads that run's field for its unguided pass instead of training it
+/// (`metrics.json`'s `unguided_from`), and ends exactly where the run that trained it ends;
+/// a `none` baseline of another seed is not that field, and is not read.
+#[test]
+fn a_matching_none_baseline_is_read_as_the_unguided_field() {
+    // trains in-process from the seeded device RNG (crate::DEVICE_RNG)
+    let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let (d, scene) = procedural(dir.path(), "stairs", "3");
+    let preset = small_preset(dir.path(), None);
+    let view = crate::reference::masked_view(&scene);
+    let pair = format!(
+        "{view}.png={}",
+        s(&d.join("clean").join(format!("{view}.png")))
+    );
+    let run = |out: &str, seed: u64, references: Vec<String>, baseline: Option<&str>| {
+        gb_inpaint::run::run(&gb_inpaint::RunSpec {
+            scene: Some(d.clone()),
+            method: Some("none".into()),
+            preset: s(&preset).into(),
+            device: BackendKind::Flex,
+            steps: Some(40),
+            seed: Some(seed),
+            references,
+            baseline: baseline.map(|b| dir.path().join(b)),
+            export: gb_inpaint::export::ExportMode::None,
+            orbit_frames: 0,
+            out: dir.path().join(out),
+            ..gb_inpaint::RunSpec::default()
+        })
+        .unwrap()
+    };
+    let plain = run("none", 0, vec![], None);
+    assert_eq!(
+        (plain.unguided_seconds, &plain.unguided_from),
+        (None, &None)
+    );
+    run("none-seed-1", 1, vec![], None);
+
+    let trained = run("held", 0, vec![pair.clone()], None);
+    assert!(trained.unguided_seconds.is_some());
+    assert_eq!(trained.unguided_from, None);
+    let reused = run("held-from-none", 0, vec![pair.clone()], Some("none"));
+    assert_eq!(
+        reused.unguided_from,
+        Some(dir.path().join("none").join("checkpoint.bin"))
+    );
+    assert_eq!(reused.mean, trained.mean);
+    assert_eq!(reused.views, trained.views);
+
+    let other = run(
+        "held-other-seed",
+        0,
+        vec![pair],
+        Some("none-seed-1/renders"),
+    );
+    assert_eq!(other.unguided_from, None);
+    assert_eq!(other.mean, trained.mean);
+}

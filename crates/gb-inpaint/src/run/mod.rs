@@ -17,6 +17,7 @@ pub mod probe;
 mod setup;
 pub mod summary;
 mod test_views;
+mod unguided;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -122,6 +123,8 @@ pub struct RunSpec {
     pub export: crate::export::ExportMode,
     /// Another run's output folder (or its `renders/`): its test-view renders are the
     /// baseline column of `report.html` (default: the masked input, said so on the page).
+    /// A finished `--method none` run of the same preset, seed, scene and device is also the
+    /// geometry term's unguided field, read from its checkpoint instead of trained again.
     #[cfg_attr(feature = "clap", arg(long))]
     pub baseline: Option<PathBuf>,
     /// Folder of metric weights (ST-LPIPS, FID, BRISQUE, NIMA; default
@@ -412,12 +415,21 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     if holds_geometry && finished {
         tracing::info!("geometry: the checkpoint is finished, so no unguided pass");
     }
-    let (hidden_depth, unguided_seconds) = if holds_geometry && !finished {
-        let (targets, seconds) = unguided_depth(&scene, &config, &method, &devices, spec.progress)?;
-        (Some(targets), Some(seconds))
+    let unguided = if holds_geometry && !finished {
+        Some(unguided::unguided_depth(
+            &scene,
+            &config,
+            &method,
+            &devices,
+            spec.baseline.as_deref(),
+            spec.progress,
+        )?)
     } else {
-        (None, None)
+        None
     };
+    let unguided_seconds = unguided.as_ref().map(|u| u.seconds);
+    let unguided_from = unguided.as_ref().and_then(|u| u.from.clone());
+    let hidden_depth = unguided.map(|u| u.targets);
     let guidance = prior.map(|p| (p, prompts.clone()));
     let mut trainer = match resumed {
         Some(parts) => {
@@ -545,6 +557,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         steps: trainer.step,
         train_seconds_this_run: fit.seconds,
         unguided_seconds,
+        unguided_from,
         render_seconds,
         eval_seconds,
         export,
@@ -591,39 +604,4 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         orbit: summary.orbit.is_some(),
     })?;
     Ok(summary)
-}
-
-/// The geometry term's targets ([`crate::geometry`]): trains the field of `config` without
-/// any hidden-region term (the `none` method; the same seed, so the same initialisation and
-/// rays as `--method none`) and renders its depth through the hidden pixels. Returns them
-/// with the pass's wall time.
-fn unguided_depth(
-    scene: &gb_nerf::scene::Scene,
-    config: &gb_nerf::train::NerfConfig,
-    method: &crate::MethodConfig,
-    devices: &Devices,
-    progress: bool,
-) -> Result<(crate::geometry::HiddenDepth, f64), InpaintError> {
-    let start = Instant::now();
-    let none = crate::MethodConfig::builtin("none")?;
-    let mut unguided = GuidedTrainer::new(scene, config.clone(), none, None, devices)?;
-    unguided.fit(&FitOptions {
-        checkpoint: None,
-        log: None,
-        append_log: false,
-        progress,
-    })?;
-    let targets = crate::geometry::HiddenDepth::from_field(
-        &unguided.nerf,
-        method.geometry.clone(),
-        method.crop_margin,
-    )?;
-    let seconds = start.elapsed().as_secs_f64();
-    tracing::info!(
-        pixels = targets.pixels.len(),
-        region = ?method.geometry.region,
-        seconds,
-        "geometry: the unguided field's depth through the held pixels"
-    );
-    Ok((targets, seconds))
 }

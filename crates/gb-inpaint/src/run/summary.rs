@@ -123,6 +123,11 @@ pub struct RunSummary {
     /// checkpoint resumed).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unguided_seconds: Option<f64>,
+    /// The `--baseline` checkpoint that the unguided pass read instead of training (a
+    /// finished `none` run of the same configuration, scene and backend); absent when it
+    /// trained or made none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unguided_from: Option<PathBuf>,
     /// Wall time of the test-view renders, s.
     pub render_seconds: f64,
     /// Wall time of the metrics, s.

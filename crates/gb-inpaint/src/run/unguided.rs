@@ -1,0 +1,152 @@
+//! The geometry term's unguided field ([`crate::geometry`]): the field of the run's
+//! configuration trained without any hidden-region term, whose depth through the hidden pixels
+//! the term holds. It is the `none` run of the same preset, seed, scene and device, so a
+//! finished `--baseline` run of `--method none` that matches all of these is that field
+//! already: its checkpoint is read instead of training it again (about 45 s of a `fast` run on
+//! 2 CPU cores, a whole `none` run at `balanced`). Anything that does not match, to the exact
+//! configuration, is said in one line and the field is trained as before.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use gb_core::Devices;
+use gb_nerf::scene::Scene;
+use gb_nerf::train::checkpoint::{config_to_toml, first_difference, load};
+use gb_nerf::train::NerfConfig;
+
+use crate::error::InpaintError;
+use crate::geometry::HiddenDepth;
+use crate::resume::{check_identity, identity, GuidedState};
+use crate::trainer::{FitOptions, GuidedTrainer};
+use crate::MethodConfig;
+
+/// The geometry term's targets, how long they took, and the baseline checkpoint they were
+/// read from (`None`: trained in this run).
+pub(super) struct UnguidedDepth {
+    pub targets: HiddenDepth,
+    pub seconds: f64,
+    pub from: Option<PathBuf>,
+}
+
+/// The geometry term's targets: the unguided field's depth through the pixels `method`
+/// holds. The field is `baseline`'s checkpoint when [`matching_baseline`] accepts it, else
+/// trained here from the run's `config` with the built-in `none` (the same seed, so the same
+/// initialisation and rays as `--method none`).
+pub(super) fn unguided_depth(
+    scene: &Scene,
+    config: &NerfConfig,
+    method: &MethodConfig,
+    devices: &Devices,
+    baseline: Option<&Path>,
+    progress: bool,
+) -> Result<UnguidedDepth, InpaintError> {
+    let start = Instant::now();
+    let reused = match baseline {
+        Some(dir) => match matching_baseline(dir, scene, config, devices) {
+            Ok(found) => Some(found),
+            Err(reason) => {
+                tracing::info!(
+                    "geometry: --baseline {} is not this run's unguided field ({reason}), so it \
+                     is trained",
+                    dir.display()
+                );
+                None
+            }
+        },
+        None => None,
+    };
+    let (field, from) = match reused {
+        Some((field, path)) => (field, Some(path)),
+        None => {
+            let none = MethodConfig::builtin("none")?;
+            let mut field = GuidedTrainer::new(scene, config.clone(), none, None, devices)?;
+            field.fit(&FitOptions {
+                checkpoint: None,
+                log: None,
+                append_log: false,
+                progress,
+            })?;
+            (field, None)
+        }
+    };
+    let targets =
+        HiddenDepth::from_field(&field.nerf, method.geometry.clone(), method.crop_margin)?;
+    let seconds = start.elapsed().as_secs_f64();
+    let source = from
+        .as_deref()
+        .map_or_else(|| "trained".to_string(), |p| p.display().to_string());
+    tracing::info!(
+        pixels = targets.pixels.len(),
+        region = ?method.geometry.region,
+        seconds,
+        from = %source,
+        "geometry: the unguided field's depth through the held pixels"
+    );
+    Ok(UnguidedDepth {
+        targets,
+        seconds,
+        from,
+    })
+}
+
+/// `dir`'s field, when `dir` (a run folder, or its `renders/`) holds a finished checkpoint of
+/// the built-in `none` with no reference, trained on this scene's data, with exactly
+/// `config`, on the same backend (its `metrics.json`'s `device`); with the checkpoint's path.
+/// Otherwise the first thing that differs, in words.
+fn matching_baseline(
+    dir: &Path,
+    scene: &Scene,
+    config: &NerfConfig,
+    devices: &Devices,
+) -> Result<(GuidedTrainer, PathBuf), String> {
+    let run = if dir.file_name().is_some_and(|n| n == "renders") {
+        dir.parent().unwrap_or(dir)
+    } else {
+        dir
+    };
+    let path = run.join("checkpoint.bin");
+    if !path.is_file() {
+        return Err(format!("no {}", path.display()));
+    }
+    let metrics = run.join("metrics.json");
+    let device = std::fs::read_to_string(&metrics)
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|v| v.get("device").and_then(|d| d.as_str()).map(str::to_owned))
+        .ok_or_else(|| format!("no device in {}", metrics.display()))?;
+    if device != devices.name() {
+        return Err(format!(
+            "trained on {device}, this run on {}",
+            devices.name()
+        ));
+    }
+    let parts = load(&path).map_err(|e| e.to_string())?;
+    if parts.meta.step != config.train.steps {
+        return Err(format!(
+            "its checkpoint is at step {} of this run's {}",
+            parts.meta.step, config.train.steps
+        ));
+    }
+    let ours = config_to_toml(config, &path).map_err(|e| e.to_string())?;
+    if parts.meta.config_toml != ours {
+        let parse = |t: &str| {
+            t.parse::<toml::Table>()
+                .map(toml::Value::Table)
+                .map_err(|e| e.to_string())
+        };
+        let reason = match first_difference("", &parse(&parts.meta.config_toml)?, &parse(&ours)?) {
+            Some((key, theirs, this)) => format!("its {key} is {theirs}, this run's {this}"),
+            None => "its configuration is written differently".into(),
+        };
+        return Err(reason);
+    }
+    let state: GuidedState = serde_json::from_value(parts.meta.extra.clone())
+        .map_err(|_| "it was not written by a run of `inpaint`".to_string())?;
+    let none = MethodConfig::builtin("none").map_err(|e| e.to_string())?;
+    let id = identity(&none, None)?;
+    check_identity(&path, &state.identity_toml, &id, true).map_err(|e| e.to_string())?;
+    let field =
+        GuidedTrainer::resume_matching(scene, &path, parts, none, None, devices, config.clone())
+            .map_err(|e| e.to_string())?;
+    Ok((field, path))
+}
