@@ -5,6 +5,9 @@
 # every seed only pools them). Runs in out/issue49/, reports in bench/results/geometry-seeds-2-4/.
 # GB_NERF names the binary (default: cargo xtask); copy it first for a long run, so that an
 # edited tree is not rebuilt under it.
+# The runs in out/ do not outlive a machine, so the reports of cells run on different days are
+# pooled from bench/results/ by tools/diag/geometry_table.py (the before/after table against the
+# older runs without the term).
 # Usage: [GB_NERF=BIN] tools/diag/geometry_seeds.sh SCENE SEED [SEED ...]
 #   e.g. tools/diag/geometry_seeds.sh stairs 2 3 4   (about 20 min a seed)
 set -euo pipefail
