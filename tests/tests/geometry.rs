@@ -15,7 +15,7 @@ use gb_inpaint::run::render_test_views;
 use gb_inpaint::{GuidedTrainer, MethodConfig};
 use gb_nerf::scene::{load, LoadOptions, Scene};
 use gb_nerf::train::NerfConfig;
-use gb_tests::{assert_success, path_str as s, small_preset, xtask};
+use gb_tests::{assert_success, path_str as s, small_preset, workspace_root, xtask};
 
 /// Steps of each run; the reference starts at half of them.
 const STEPS: usize = 200;
@@ -245,4 +245,70 @@ fn a_matching_none_baseline_is_read_as_the_unguided_field() {
     );
     assert_eq!(other.unguided_from, None);
     assert_eq!(other.mean, trained.mean);
+}
+
+/// An `auto` choice of zero weights trains exactly as `none`: given a matching finished `none`
+/// run as `--baseline`, the run reads that field instead of training it (`field_from`), copies
+/// its log, writes its own checkpoint, and ends exactly where the run that trained ends.
+#[test]
+fn an_auto_choice_of_no_guidance_reads_a_matching_none_baseline() {
+    // trains in-process from the seeded device RNG (crate::DEVICE_RNG)
+    let _rng = crate::DEVICE_RNG.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let (d, _) = procedural(dir.path(), "stairs", "3");
+    let preset = small_preset(dir.path(), None);
+    // the built-in auto method with one candidate pair, (0, 0): the choice is no guidance
+    let auto = dir.path().join("auto-zero.toml");
+    let builtin =
+        std::fs::read_to_string(workspace_root().join("configs/methods/gb-nerf-auto.toml"))
+            .unwrap();
+    let zero = builtin
+        .replace("rgb = [0.0, 1e-5]", "rgb = [0.0]")
+        .replace("normal = [0.0, 1e-5]", "normal = [0.0]");
+    assert!(zero.contains("rgb = [0.0]\nnormal = [0.0]"), "{zero}");
+    std::fs::write(&auto, zero).unwrap();
+    let spec = |out: &str, method: &Path, baseline: Option<&str>| gb_inpaint::RunSpec {
+        scene: Some(d.clone()),
+        method: Some(s(method).into()),
+        preset: s(&preset).into(),
+        device: BackendKind::Flex,
+        steps: Some(40),
+        seed: Some(0),
+        baseline: baseline.map(|b| dir.path().join(b)),
+        export: gb_inpaint::export::ExportMode::None,
+        orbit_frames: 0,
+        out: dir.path().join(out),
+        ..gb_inpaint::RunSpec::default()
+    };
+    let run = |spec: &gb_inpaint::RunSpec| gb_inpaint::run::run(spec).unwrap();
+    run(&spec("none", Path::new("none"), None));
+    let trained = run(&spec("auto", &auto, None));
+    assert_eq!(trained.field_from, None);
+    let choice = |r: &gb_inpaint::RunSummary| {
+        let a = r.auto.as_ref().expect("an auto report");
+        (a.lambda_rgb, a.lambda_normal)
+    };
+    assert_eq!(choice(&trained), (0.0, 0.0));
+
+    let from_none = spec("auto-from-none", &auto, Some("none"));
+    let read = run(&from_none);
+    assert_eq!(
+        read.field_from,
+        Some(dir.path().join("none").join("checkpoint.bin"))
+    );
+    assert_eq!(choice(&read), (0.0, 0.0));
+    assert_eq!(
+        (read.steps, read.mean.clone()),
+        (trained.steps, trained.mean.clone())
+    );
+    assert_eq!(read.views, trained.views);
+    let out = dir.path().join("auto-from-none");
+    let log = std::fs::read_to_string(out.join("train_log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), 40);
+    // its own checkpoint: resuming the finished run trains nothing and scores the same field
+    let again = run(&gb_inpaint::RunSpec {
+        resume: true,
+        ..from_none
+    });
+    assert_eq!((again.steps, again.mean), (40, trained.mean));
 }

@@ -124,7 +124,8 @@ pub struct RunSpec {
     /// Another run's output folder (or its `renders/`): its test-view renders are the
     /// baseline column of `report.html` (default: the masked input, said so on the page).
     /// A finished `--method none` run of the same preset, seed, scene and device is also the
-    /// geometry term's unguided field, read from its checkpoint instead of trained again.
+    /// geometry term's unguided field, read from its checkpoint instead of trained again, and
+    /// the whole field of an `auto` run whose choice is no guidance.
     #[cfg_attr(feature = "clap", arg(long))]
     pub baseline: Option<PathBuf>,
     /// Folder of metric weights (ST-LPIPS, FID, BRISQUE, NIMA; default
@@ -430,9 +431,46 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
     let unguided_seconds = unguided.as_ref().map(|u| u.seconds);
     let unguided_from = unguided.as_ref().and_then(|u| u.from.clone());
     let hidden_depth = unguided.map(|u| u.targets);
+    // an `auto` choice of zero weights trains exactly as `none` (without a reference or an
+    // oracle): a matching `--baseline` none run is this run's field already
+    let adopted = match spec.baseline.as_deref() {
+        Some(dir)
+            if auto.is_some()
+                && !method.guides()
+                && references.is_empty()
+                && oracle_images.is_none()
+                && pre.is_none()
+                && !resuming =>
+        {
+            match unguided::matching_baseline(dir, &config, &devices)
+                .and_then(|b| unguided::baseline_field(b, &scene, &config, &devices))
+            {
+                Ok(found) => Some(found),
+                Err(reason) => {
+                    tracing::info!(
+                        "auto: --baseline {} is not this run's field ({reason}), so it is trained",
+                        dir.display()
+                    );
+                    None
+                }
+            }
+        }
+        _ => None,
+    };
+    let field_from = adopted.as_ref().map(|(_, _, path)| path.clone());
     let guidance = prior.map(|p| (p, prompts.clone()));
-    let mut trainer = match resumed {
-        Some(parts) => {
+    let mut trainer = match (resumed, adopted) {
+        (None, Some((nerf, totals, path))) => {
+            tracing::info!(
+                path = %path.display(),
+                "auto: the choice trains exactly as none, so the --baseline run's field is this \
+                 run's"
+            );
+            let mut t = GuidedTrainer::from_base(nerf, &scene, method.clone(), guidance)?;
+            t.totals = totals;
+            t
+        }
+        (Some(parts), _) => {
             tracing::info!(path = %ckpt.display(), "resuming");
             GuidedTrainer::resume_matching(
                 &scene,
@@ -444,7 +482,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
                 config,
             )?
         }
-        None => GuidedTrainer::new(&scene, config, method.clone(), guidance, &devices)?,
+        (None, None) => GuidedTrainer::new(&scene, config, method.clone(), guidance, &devices)?,
     };
     if !references.is_empty() {
         tracing::info!(
@@ -496,6 +534,13 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         append_log: resuming,
         progress: spec.progress,
     })?;
+    if let Some(from) = &field_from {
+        // the field's steps are the baseline's: its log, and a checkpoint of this run
+        let theirs = from.with_file_name("train_log.jsonl");
+        let ours = out.join("train_log.jsonl");
+        std::fs::copy(&theirs, &ours).map_err(|e| InpaintError::io(&theirs, e))?;
+        trainer.save_checkpoint(&ckpt)?;
+    }
 
     let render_start = Instant::now();
     let tested = test_views::render_test_views(&out.join("renders"), &scene, &trainer)?;
@@ -558,6 +603,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
         train_seconds_this_run: fit.seconds,
         unguided_seconds,
         unguided_from,
+        field_from,
         render_seconds,
         eval_seconds,
         export,

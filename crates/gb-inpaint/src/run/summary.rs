@@ -128,6 +128,11 @@ pub struct RunSummary {
     /// trained or made none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unguided_from: Option<PathBuf>,
+    /// The `--baseline` checkpoint that is this run's field: an `auto` choice of zero weights
+    /// trains exactly as `none`, so a matching finished `none` run is read instead of trained
+    /// (its log is copied, and this run's checkpoint written from it); absent when trained.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub field_from: Option<PathBuf>,
     /// Wall time of the test-view renders, s.
     pub render_seconds: f64,
     /// Wall time of the metrics, s.

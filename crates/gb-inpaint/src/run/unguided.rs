@@ -5,18 +5,21 @@
 //! already: its checkpoint is read instead of training it again (about 45 s of a `fast` run on
 //! 2 CPU cores, a whole `none` run at `balanced`). Anything that does not match, to the exact
 //! configuration, is said in one line and the field is trained as before.
+//!
+//! The same baseline is the whole field of a run that trains exactly as `none`: an `auto`
+//! choice of zero weights ([`baseline_field`]), which then only renders and scores.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use gb_core::Devices;
 use gb_nerf::scene::Scene;
-use gb_nerf::train::checkpoint::{config_to_toml, first_difference, load};
-use gb_nerf::train::NerfConfig;
+use gb_nerf::train::checkpoint::{config_to_toml, first_difference, load, CheckpointParts};
+use gb_nerf::train::{NerfConfig, Trainer};
 
 use crate::error::InpaintError;
 use crate::geometry::HiddenDepth;
-use crate::resume::{check_identity, identity, GuidedState};
+use crate::resume::{check_identity, identity, GuidedState, RunTotals};
 use crate::trainer::{FitOptions, GuidedTrainer};
 use crate::MethodConfig;
 
@@ -42,7 +45,20 @@ pub(super) fn unguided_depth(
 ) -> Result<UnguidedDepth, InpaintError> {
     let start = Instant::now();
     let reused = match baseline {
-        Some(dir) => match matching_baseline(dir, scene, config, devices) {
+        Some(dir) => match matching_baseline(dir, config, devices).and_then(|b| {
+            let none = MethodConfig::builtin("none").map_err(|e| e.to_string())?;
+            let field = GuidedTrainer::resume_matching(
+                scene,
+                &b.path,
+                b.parts,
+                none,
+                None,
+                devices,
+                config.clone(),
+            )
+            .map_err(|e| e.to_string())?;
+            Ok((field, b.path))
+        }) {
             Ok(found) => Some(found),
             Err(reason) => {
                 tracing::info!(
@@ -89,16 +105,43 @@ pub(super) fn unguided_depth(
     })
 }
 
-/// `dir`'s field, when `dir` (a run folder, or its `renders/`) holds a finished checkpoint of
-/// the built-in `none` with no reference, trained on this scene's data, with exactly
-/// `config`, on the same backend (its `metrics.json`'s `device`); with the checkpoint's path.
-/// Otherwise the first thing that differs, in words.
-fn matching_baseline(
-    dir: &Path,
+/// A `--baseline` run's finished checkpoint that [`matching_baseline`] accepted: its path, its
+/// parts (the guided state still in them) and that state.
+pub(super) struct Baseline {
+    pub path: PathBuf,
+    pub parts: CheckpointParts,
+    pub state: GuidedState,
+}
+
+/// The field of an accepted baseline under this run's own method, for a run that trains
+/// exactly as `none` (an `auto` choice of zero weights): the restored reconstruction trainer
+/// (scene and training data checked again) and the baseline's counters.
+pub(super) fn baseline_field(
+    baseline: Baseline,
     scene: &Scene,
     config: &NerfConfig,
     devices: &Devices,
-) -> Result<(GuidedTrainer, PathBuf), String> {
+) -> Result<(Trainer, RunTotals, PathBuf), String> {
+    let Baseline {
+        path,
+        mut parts,
+        state,
+    } = baseline;
+    parts.meta.extra = serde_json::Value::Null;
+    let nerf = Trainer::resume_from(scene, &path, parts, config.clone(), devices)
+        .map_err(|e| e.to_string())?;
+    Ok((nerf, state.totals, path))
+}
+
+/// `dir`'s checkpoint, when `dir` (a run folder, or its `renders/`) holds a finished
+/// checkpoint of the built-in `none` with no reference, with exactly `config`, trained on the
+/// same backend (its `metrics.json`'s `device`); the training data is checked when the field
+/// is restored. Otherwise the first thing that differs, in words.
+pub(super) fn matching_baseline(
+    dir: &Path,
+    config: &NerfConfig,
+    devices: &Devices,
+) -> Result<Baseline, String> {
     let run = if dir.file_name().is_some_and(|n| n == "renders") {
         dir.parent().unwrap_or(dir)
     } else {
@@ -145,8 +188,5 @@ fn matching_baseline(
     let none = MethodConfig::builtin("none").map_err(|e| e.to_string())?;
     let id = identity(&none, None)?;
     check_identity(&path, &state.identity_toml, &id, true).map_err(|e| e.to_string())?;
-    let field =
-        GuidedTrainer::resume_matching(scene, &path, parts, none, None, devices, config.clone())
-            .map_err(|e| e.to_string())?;
-    Ok((field, path))
+    Ok(Baseline { path, parts, state })
 }

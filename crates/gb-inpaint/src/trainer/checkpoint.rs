@@ -107,6 +107,15 @@ impl GuidedTrainer {
         Ok(t)
     }
 
+    /// Writes this trainer's checkpoint to `path` now (atomically), as [`Self::fit`] does at
+    /// its checkpoint steps: for a run whose field was read, not trained.
+    pub(crate) fn save_checkpoint(&mut self, path: &Path) -> Result<(), InpaintError> {
+        let state = self.checkpoint_state()?;
+        self.nerf.save_checkpoint_with(path, state)?;
+        self.last_good_checkpoint = Some((path.to_path_buf(), self.nerf.step));
+        Ok(())
+    }
+
     /// The guided trainer's state for a checkpoint ([`crate::resume`]).
     pub(super) fn checkpoint_state(&self) -> Result<serde_json::Value, InpaintError> {
         let mut visibility: Vec<SavedMap> = self
