@@ -186,6 +186,31 @@ fn an_exact_reference_leaves_the_hidden_wall_at_its_true_depth() {
     );
 }
 
+/// A 40-step run of `method` on the scene `d` with `preset`, seed 0, into `dir/out`, with
+/// `dir/baseline` as its `--baseline` when given; no export, no orbit.
+fn short_run(
+    dir: &Path,
+    d: &Path,
+    preset: &Path,
+    method: &str,
+    out: &str,
+    baseline: Option<&str>,
+) -> gb_inpaint::RunSpec {
+    gb_inpaint::RunSpec {
+        scene: Some(d.to_path_buf()),
+        method: Some(method.into()),
+        preset: s(preset).into(),
+        device: BackendKind::Flex,
+        steps: Some(40),
+        seed: Some(0),
+        baseline: baseline.map(|b| dir.join(b)),
+        export: gb_inpaint::export::ExportMode::None,
+        orbit_frames: 0,
+        out: dir.join(out),
+        ..gb_inpaint::RunSpec::default()
+    }
+}
+
 /// A run that holds the geometry term, given a finished `none` run of the same configuration
 /// as `--baseline`, reads that run's field for its unguided pass instead of training it
 /// (`metrics.json`'s `unguided_from`), and ends exactly where the run that trained it ends;
@@ -204,18 +229,9 @@ fn a_matching_none_baseline_is_read_as_the_unguided_field() {
     );
     let run = |out: &str, seed: u64, references: Vec<String>, baseline: Option<&str>| {
         gb_inpaint::run::run(&gb_inpaint::RunSpec {
-            scene: Some(d.clone()),
-            method: Some("none".into()),
-            preset: s(&preset).into(),
-            device: BackendKind::Flex,
-            steps: Some(40),
             seed: Some(seed),
             references,
-            baseline: baseline.map(|b| dir.path().join(b)),
-            export: gb_inpaint::export::ExportMode::None,
-            orbit_frames: 0,
-            out: dir.path().join(out),
-            ..gb_inpaint::RunSpec::default()
+            ..short_run(dir.path(), &d, &preset, "none", out, baseline)
         })
         .unwrap()
     };
@@ -267,18 +283,8 @@ fn an_auto_choice_of_no_guidance_reads_a_matching_none_baseline() {
         .replace("normal = [0.0, 1e-5]", "normal = [0.0]");
     assert!(zero.contains("rgb = [0.0]\nnormal = [0.0]"), "{zero}");
     std::fs::write(&auto, zero).unwrap();
-    let spec = |out: &str, method: &Path, baseline: Option<&str>| gb_inpaint::RunSpec {
-        scene: Some(d.clone()),
-        method: Some(s(method).into()),
-        preset: s(&preset).into(),
-        device: BackendKind::Flex,
-        steps: Some(40),
-        seed: Some(0),
-        baseline: baseline.map(|b| dir.path().join(b)),
-        export: gb_inpaint::export::ExportMode::None,
-        orbit_frames: 0,
-        out: dir.path().join(out),
-        ..gb_inpaint::RunSpec::default()
+    let spec = |out: &str, method: &Path, baseline: Option<&str>| {
+        short_run(dir.path(), &d, &preset, s(method), out, baseline)
     };
     let run = |spec: &gb_inpaint::RunSpec| gb_inpaint::run::run(spec).unwrap();
     run(&spec("none", Path::new("none"), None));

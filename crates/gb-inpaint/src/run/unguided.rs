@@ -14,12 +14,12 @@ use std::time::Instant;
 
 use gb_core::Devices;
 use gb_nerf::scene::Scene;
-use gb_nerf::train::checkpoint::{config_to_toml, first_difference, load, CheckpointParts};
+use gb_nerf::train::checkpoint::{load, CheckpointParts};
 use gb_nerf::train::{NerfConfig, Trainer};
 
 use crate::error::InpaintError;
 use crate::geometry::HiddenDepth;
-use crate::resume::{check_identity, identity, GuidedState, RunTotals};
+use crate::resume::{check_identity, check_preset, identity, GuidedState, RunTotals};
 use crate::trainer::{FitOptions, GuidedTrainer};
 use crate::MethodConfig;
 
@@ -45,21 +45,10 @@ pub(super) fn unguided_depth(
 ) -> Result<UnguidedDepth, InpaintError> {
     let start = Instant::now();
     let reused = match baseline {
-        Some(dir) => match matching_baseline(dir, config, devices).and_then(|b| {
-            let none = MethodConfig::builtin("none").map_err(|e| e.to_string())?;
-            let field = GuidedTrainer::resume_matching(
-                scene,
-                &b.path,
-                b.parts,
-                none,
-                None,
-                devices,
-                config.clone(),
-            )
-            .map_err(|e| e.to_string())?;
-            Ok((field, b.path))
-        }) {
-            Ok(found) => Some(found),
+        Some(dir) => match matching_baseline(dir, config, devices)
+            .and_then(|b| baseline_field(b, scene, config, devices))
+        {
+            Ok((field, _, path)) => Some((field, path)),
             Err(reason) => {
                 tracing::info!(
                     "geometry: --baseline {} is not this run's unguided field ({reason}), so it \
@@ -82,11 +71,10 @@ pub(super) fn unguided_depth(
                 append_log: false,
                 progress,
             })?;
-            (field, None)
+            (field.nerf, None)
         }
     };
-    let targets =
-        HiddenDepth::from_field(&field.nerf, method.geometry.clone(), method.crop_margin)?;
+    let targets = HiddenDepth::from_field(&field, method.geometry.clone(), method.crop_margin)?;
     let seconds = start.elapsed().as_secs_f64();
     let source = from
         .as_deref()
@@ -113,9 +101,10 @@ pub(super) struct Baseline {
     pub state: GuidedState,
 }
 
-/// The field of an accepted baseline under this run's own method, for a run that trains
-/// exactly as `none` (an `auto` choice of zero weights): the restored reconstruction trainer
-/// (scene and training data checked again) and the baseline's counters.
+/// The field of an accepted baseline: the restored reconstruction trainer (scene and training
+/// data checked here), the baseline's counters and its checkpoint's path. The unguided pass
+/// renders its depth; a run that trains exactly as `none` (an `auto` choice of zero weights)
+/// wraps it in its own method.
 pub(super) fn baseline_field(
     baseline: Baseline,
     scene: &Scene,
@@ -134,9 +123,9 @@ pub(super) fn baseline_field(
 }
 
 /// `dir`'s checkpoint, when `dir` (a run folder, or its `renders/`) holds a finished
-/// checkpoint of the built-in `none` with no reference, with exactly `config`, trained on the
-/// same backend (its `metrics.json`'s `device`); the training data is checked when the field
-/// is restored. Otherwise the first thing that differs, in words.
+/// checkpoint of the built-in `none` with no reference, with `config` (any cadence of
+/// checkpoints; the step count is the run's), trained on the same backend (its
+/// `metrics.json`'s `device`); the training data is checked when the field is restored. Otherwise the first thing that differs, in words.
 pub(super) fn matching_baseline(
     dir: &Path,
     config: &NerfConfig,
@@ -170,19 +159,8 @@ pub(super) fn matching_baseline(
             parts.meta.step, config.train.steps
         ));
     }
-    let ours = config_to_toml(config, &path).map_err(|e| e.to_string())?;
-    if parts.meta.config_toml != ours {
-        let parse = |t: &str| {
-            t.parse::<toml::Table>()
-                .map(toml::Value::Table)
-                .map_err(|e| e.to_string())
-        };
-        let reason = match first_difference("", &parse(&parts.meta.config_toml)?, &parse(&ours)?) {
-            Some((key, theirs, this)) => format!("its {key} is {theirs}, this run's {this}"),
-            None => "its configuration is written differently".into(),
-        };
-        return Err(reason);
-    }
+    let stored = parts.meta.config(&path).map_err(|e| e.to_string())?;
+    check_preset(&path, &stored, config).map_err(|e| e.to_string())?;
     let state: GuidedState = serde_json::from_value(parts.meta.extra.clone())
         .map_err(|_| "it was not written by a run of `inpaint`".to_string())?;
     let none = MethodConfig::builtin("none").map_err(|e| e.to_string())?;
