@@ -146,77 +146,126 @@ pub fn identity(
     Ok(toml::Value::Table(t))
 }
 
+/// A field whose value differs between a checkpoint and the run that reads it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Difference {
+    /// The dotted path of the field (`preset.train.rays_per_batch`, `method.name`).
+    pub field: String,
+    /// Its value in the checkpoint.
+    pub theirs: String,
+    /// Its value in this run.
+    pub ours: String,
+}
+
+impl From<(String, String, String)> for Difference {
+    fn from((field, theirs, ours): (String, String, String)) -> Self {
+        Self {
+            field,
+            theirs,
+            ours,
+        }
+    }
+}
+
+impl std::fmt::Display for Difference {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "written with {} = {}, this run has {}",
+            self.field, self.theirs, self.ours
+        )
+    }
+}
+
 /// The first difference of two tables, looking at their `key` first (the most telling
 /// difference: another preset or method by name).
-fn name_first(
-    prefix: &str,
-    key: &str,
-    a: &toml::Value,
-    b: &toml::Value,
-) -> Option<(String, String, String)> {
+fn name_first(prefix: &str, key: &str, a: &toml::Value, b: &toml::Value) -> Option<Difference> {
     match (a.get(key), b.get(key)) {
-        (Some(x), Some(y)) if x != y => {
-            Some((format!("{prefix}.{key}"), x.to_string(), y.to_string()))
-        }
-        _ => first_difference(prefix, a, b),
+        (Some(x), Some(y)) if x != y => Some(Difference {
+            field: format!("{prefix}.{key}"),
+            theirs: x.to_string(),
+            ours: y.to_string(),
+        }),
+        _ => first_difference(prefix, a, b).map(Difference::from),
     }
 }
 
-fn refusal(path: &Path, (field, theirs, ours): (String, String, String)) -> NerfError {
+fn refusal(path: &Path, d: Difference) -> NerfError {
     NerfError::Checkpoint {
         path: path.to_path_buf(),
-        reason: format!(
-            "written with {field} = {theirs}, this run has {ours}; resume with the same \
-             settings, or start afresh without --resume"
-        ),
+        reason: format!("{d}; resume with the same settings, or start afresh without --resume"),
     }
 }
 
-/// Refuses (naming `path` and the first differing field) a checkpoint whose preset differs
-/// from `given` anywhere but in `train.steps` and `train.checkpoint_every` (which may change
-/// on resume: the run is extended, or checkpointed at another cadence).
-pub fn check_preset(path: &Path, stored: &NerfConfig, given: &NerfConfig) -> Result<(), NerfError> {
+/// The first field where the preset `given` differs from `stored`, but for `train.steps` and
+/// `train.checkpoint_every` (which may change on resume: the run is extended, or checkpointed
+/// at another cadence).
+pub fn preset_difference(
+    stored: &NerfConfig,
+    given: &NerfConfig,
+) -> Result<Option<Difference>, toml::ser::Error> {
     let mut given = given.clone();
     given.train.steps = stored.train.steps;
     given.train.checkpoint_every = stored.train.checkpoint_every;
-    let value = |c: &NerfConfig| {
-        toml::Value::try_from(c).map_err(|e| NerfError::Checkpoint {
-            path: path.to_path_buf(),
-            reason: format!("config: {e}"),
-        })
-    };
-    let (a, b) = (value(stored)?, value(&given)?);
-    match name_first("preset", "name", &a, &b) {
+    let (a, b) = (
+        toml::Value::try_from(stored)?,
+        toml::Value::try_from(&given)?,
+    );
+    Ok(name_first("preset", "name", &a, &b))
+}
+
+/// Refuses (naming `path` and the first differing field) a checkpoint whose preset differs
+/// from `given` ([`preset_difference`]).
+pub fn check_preset(path: &Path, stored: &NerfConfig, given: &NerfConfig) -> Result<(), NerfError> {
+    let difference = preset_difference(stored, given).map_err(|e| NerfError::Checkpoint {
+        path: path.to_path_buf(),
+        reason: format!("config: {e}"),
+    })?;
+    match difference {
         Some(d) => Err(refusal(path, d)),
         None => Ok(()),
     }
 }
 
+/// The first difference of the run identity `current` from a checkpoint's (`stored_toml`,
+/// [`identity`]): anywhere when `strict`, else only in the method's name.
+pub fn identity_difference(
+    stored_toml: &str,
+    current: &toml::Value,
+    strict: bool,
+) -> Result<Option<Difference>, toml::de::Error> {
+    let stored: toml::Value = toml::from_str(stored_toml)?;
+    let name = |v: &toml::Value| v.get("method").and_then(|m| m.get("name")).cloned();
+    let by_name = match (name(&stored), name(current)) {
+        (Some(a), Some(b)) if a != b => Some(Difference {
+            field: "method.name".to_string(),
+            theirs: a.to_string(),
+            ours: b.to_string(),
+        }),
+        _ => None,
+    };
+    Ok(by_name.or_else(|| {
+        strict
+            .then(|| first_difference("", &stored, current))
+            .flatten()
+            .map(Difference::from)
+    }))
+}
+
 /// Refuses a checkpoint whose run identity (`stored_toml`, [`identity`]) differs from
-/// `current`: anywhere when `strict`, else only in the method's name.
+/// `current` ([`identity_difference`]).
 pub fn check_identity(
     path: &Path,
     stored_toml: &str,
     current: &toml::Value,
     strict: bool,
 ) -> Result<(), NerfError> {
-    let stored: toml::Value = toml::from_str(stored_toml).map_err(|e| NerfError::Checkpoint {
-        path: path.to_path_buf(),
-        reason: format!("run identity: {e}"),
-    })?;
-    let name = |v: &toml::Value| v.get("method").and_then(|m| m.get("name")).cloned();
-    let by_name = match (name(&stored), name(current)) {
-        (Some(a), Some(b)) if a != b => {
-            Some(("method.name".to_string(), a.to_string(), b.to_string()))
-        }
-        _ => None,
-    };
-    let diff = by_name.or_else(|| {
-        strict
-            .then(|| first_difference("", &stored, current))
-            .flatten()
-    });
-    match diff {
+    let difference =
+        identity_difference(stored_toml, current, strict).map_err(|e| NerfError::Checkpoint {
+            path: path.to_path_buf(),
+            reason: format!("run identity: {e}"),
+        })?;
+    match difference {
         Some(d) => Err(refusal(path, d)),
         None => Ok(()),
     }
@@ -334,5 +383,44 @@ mod tests {
             "{e}"
         );
         assert_eq!(e.lines().count(), 1);
+        let d = preset_difference(&a, &b).unwrap().unwrap();
+        assert_eq!(
+            (d.field.as_str(), d.theirs.parse::<usize>().unwrap() + 1),
+            ("preset.train.rays_per_batch", b.train.rays_per_batch)
+        );
+        assert!(!d.to_string().contains("--resume"), "{d}");
+    }
+
+    #[test]
+    fn an_identity_differs_by_method_name_first_and_elsewhere_only_when_strict() {
+        let none = MethodConfig::builtin("none").unwrap();
+        let stored = toml::to_string(&identity(&none, None).unwrap()).unwrap();
+        let same = identity(&none, None).unwrap();
+        assert_eq!(identity_difference(&stored, &same, true).unwrap(), None);
+        let mut renamed = none.clone();
+        renamed.name = "mine".into();
+        renamed.lambda_rgb = crate::method::Weight::Fixed(1.0);
+        let d = identity_difference(&stored, &identity(&renamed, None).unwrap(), false)
+            .unwrap()
+            .unwrap();
+        assert_eq!(d.field, "method.name");
+        let mut weighted = none.clone();
+        weighted.lambda_rgb = crate::method::Weight::Fixed(1.0);
+        let weighted = identity(&weighted, None).unwrap();
+        assert_eq!(
+            identity_difference(&stored, &weighted, false).unwrap(),
+            None
+        );
+        let d = identity_difference(&stored, &weighted, true)
+            .unwrap()
+            .unwrap();
+        assert_eq!(d.field, "method.lambda_rgb");
+        let e = check_identity(Path::new("run/checkpoint.bin"), &stored, &weighted, true)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("run/checkpoint.bin:") && e.contains("method.lambda_rgb"),
+            "{e}"
+        );
     }
 }

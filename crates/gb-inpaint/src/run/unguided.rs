@@ -19,7 +19,7 @@ use gb_nerf::train::{NerfConfig, Trainer};
 
 use crate::error::InpaintError;
 use crate::geometry::HiddenDepth;
-use crate::resume::{check_identity, check_preset, identity, GuidedState, RunTotals};
+use crate::resume::{identity, identity_difference, preset_difference, GuidedState, RunTotals};
 use crate::trainer::{FitOptions, GuidedTrainer};
 use crate::MethodConfig;
 
@@ -160,11 +160,17 @@ pub(super) fn matching_baseline(
         ));
     }
     let stored = parts.meta.config(&path).map_err(|e| e.to_string())?;
-    check_preset(&path, &stored, config).map_err(|e| e.to_string())?;
+    if let Some(d) = preset_difference(&stored, config).map_err(|e| e.to_string())? {
+        return Err(format!("its preset differs: {d}"));
+    }
     let state: GuidedState = serde_json::from_value(parts.meta.extra.clone())
         .map_err(|_| "it was not written by a run of `inpaint`".to_string())?;
     let none = MethodConfig::builtin("none").map_err(|e| e.to_string())?;
     let id = identity(&none, None)?;
-    check_identity(&path, &state.identity_toml, &id, true).map_err(|e| e.to_string())?;
+    if let Some(d) =
+        identity_difference(&state.identity_toml, &id, true).map_err(|e| e.to_string())?
+    {
+        return Err(format!("it is not the built-in none: {d}"));
+    }
     Ok(Baseline { path, parts, state })
 }
