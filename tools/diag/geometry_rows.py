@@ -1,0 +1,49 @@
+#!/usr/bin/env python3
+"""Issue 49's per-seed rows of docs/results.md ("Reporting seeds 2 to 4, with the term on by
+default"): for one scene and seed, each run of the pooled probe table
+bench/results/geometry-seed-SEED/probe-SCENE.json (tools/diag/geometry_collect.sh) with its
+mask-box SSIM, ST-LPIPS, D-PSNR, D-PSNR on the true scale and share of hidden pixels within 5%
+of the true depth, and beside each method the same seed's older run without the term (pooled
+from the `bench quality` reports given with --before, as tools/diag/geometry_table.py pools
+them). Standard library only.
+
+    tools/diag/geometry_rows.py SCENE SEED --before REPORT...
+"""
+import argparse
+import json
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rank_methods import pool  # noqa: E402
+
+ORDER = ["none", "gb-nerf-unseen", "reference-oracle", "score-oracle"]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scene")
+    ap.add_argument("seed", type=int)
+    ap.add_argument("--before", nargs="+", required=True)
+    ap.add_argument("--results", default="bench/results")
+    a = ap.parse_args()
+    path = os.path.join(a.results, f"geometry-seed-{a.seed}", f"probe-{a.scene}.json")
+    probe = json.load(open(path))
+    before = pool(a.before).get(a.scene, {})
+    rows = [r for r in ORDER if r in probe] + sorted(r for r in probe if r not in ORDER)
+    print("| seed | scene | row | SSIM ↑ | ST-LPIPS ↓ | D-PSNR ↑ | true scale ↑ | hidden within 5% | no term: SSIM / ST-LPIPS / D-PSNR |")
+    print("|---|---|---|---:|---:|---:|---:|---:|---|")
+    for row in rows:
+        p = probe[row]
+        old = before.get(row) if row != "none" else None
+        was = ""
+        if old and all(a.seed in old[k] for k in ("ssim_bbox", "lpips_bbox", "d_psnr_bbox")):
+            was = (f"{old['ssim_bbox'][a.seed]:.3f} / {old['lpips_bbox'][a.seed]:.3f} / "
+                   f"{old['d_psnr_bbox'][a.seed]:.2f}")
+        print(f"| {a.seed} | `{a.scene}` | `{row}` | {p['ssim_bbox']:.3f} | {p['lpips_bbox']:.3f} | "
+              f"{p['d_psnr_bbox']:.2f} | {p['disparity_scale.d_psnr_true_scale']:.2f} | "
+              f"{100 * p['hidden.within_tolerance']:.0f}% | {was} |")
+
+
+if __name__ == "__main__":
+    main()
