@@ -7,7 +7,9 @@ of the true depth, and beside each method the same seed's older run without the 
 from the `bench quality` reports given with --before, as tools/diag/geometry_table.py pools
 them). Standard library only.
 
-    tools/diag/geometry_rows.py SCENE SEED --before REPORT...
+    tools/diag/geometry_rows.py SCENE SEED --before REPORT... [--whole]
+
+--whole adds the PSNR over the whole image (the term's cost outside the hole) as a last column.
 """
 import argparse
 import json
@@ -26,13 +28,16 @@ def main():
     ap.add_argument("seed", type=int)
     ap.add_argument("--before", nargs="+", required=True)
     ap.add_argument("--results", default="bench/results")
+    ap.add_argument("--whole", action="store_true", help="add the whole-image PSNR")
     a = ap.parse_args()
     path = os.path.join(a.results, f"geometry-seed-{a.seed}", f"probe-{a.scene}.json")
     probe = json.load(open(path))
     before = pool(a.before).get(a.scene, {})
     rows = [r for r in ORDER if r in probe] + sorted(r for r in probe if r not in ORDER)
-    print("| seed | scene | row | SSIM ↑ | ST-LPIPS ↓ | D-PSNR ↑ | true scale ↑ | hidden within 5% | no term: SSIM / ST-LPIPS / D-PSNR |")
-    print("|---|---|---|---:|---:|---:|---:|---:|---|")
+    whole = " PSNR, whole image ↑ |" if a.whole else ""
+    print("| seed | scene | row | SSIM ↑ | ST-LPIPS ↓ | D-PSNR ↑ | true scale ↑ | hidden within 5% "
+          "| no term: SSIM / ST-LPIPS / D-PSNR |" + whole)
+    print("|---|---|---|---:|---:|---:|---:|---:|---|" + ("---:|" if a.whole else ""))
     for row in rows:
         p = probe[row]
         old = before.get(row) if row != "none" else None
@@ -42,7 +47,8 @@ def main():
                    f"{old['d_psnr_bbox'][a.seed]:.2f}")
         print(f"| {a.seed} | `{a.scene}` | `{row}` | {p['ssim_bbox']:.3f} | {p['lpips_bbox']:.3f} | "
               f"{p['d_psnr_bbox']:.2f} | {p['disparity_scale.d_psnr_true_scale']:.2f} | "
-              f"{100 * p['hidden.within_tolerance']:.0f}% | {was} |")
+              f"{100 * p['hidden.within_tolerance']:.0f}% | {was} |"
+              + (f" {p['psnr']:.2f} |" if a.whole else ""))
 
 
 if __name__ == "__main__":

@@ -21,15 +21,22 @@ scene_dir="out/issue49/$scene-scene-seed-$seed"
 methods="bench/results/geometry-seed-$seed/methods"
 if [ -n "${GB_NERF:-}" ]; then run=("$GB_NERF"); else run=(cargo xtask); fi
 mkdir -p "$methods"
+# the grid's none run, when finished, is every variant's unguided field (--baseline: read, not
+# trained again; the metrics are the same)
+baseline=()
+[ -f "$grid/none/checkpoint.bin" ] && baseline=(--baseline "$grid/none")
 for row in "${rows[@]}"; do
     name="$scene-$row-$variant"
     file="$methods/$name.toml"
+    # the grid's method file (the oracles'), else the built-in one (gb-nerf-unseen)
+    source="$grid/$row.toml"
+    [ -f "$source" ] || source="configs/methods/$row.toml"
     # the method's own [geometry] table (the built-in none and gb-nerf-unseen carry one) gives
     # way to the variant's: drop it, up to the next table
-    sed -e "s/^name = \"$row\"/name = \"$row-$variant\"/" "$grid/$row.toml" |
+    sed -e "s/^name = \"$row\"/name = \"$row-$variant\"/" "$source" |
         awk '/^\[geometry\]$/ { skip = 1; next } /^\[/ { skip = 0 } !skip' > "$file"
     printf '\n[geometry]\n%b\n' "$table" >> "$file"
     "${run[@]}" inpaint --scene "$scene_dir" --method "$file" --seed "$seed" --preset fast \
         --weights "${GB_TEST_DATA:-../shared}/weights" --export none --orbit-frames 0 --probe \
-        --out "$grid/$row-$variant"
+        "${baseline[@]}" --out "$grid/$row-$variant"
 done

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Issue 49's weight of the geometry term, tuned: on one scene and seed (a tuning seed, 100 or
+# 101), the grid of tools/diag/geometry_probe.sh (none and both oracles at the built-in
+# weight; finished runs are reused), then for each WEIGHT the ROWS again with
+# `[geometry] depth_weight = WEIGHT` on the guided crop (tools/diag/geometry_variants.sh,
+# variant `wWEIGHT`, the grid's none read as the unguided field), then the probe table and
+# pictures into bench/results/geometry-seed-SEED/ (tools/diag/geometry_collect.sh). Read the
+# rows with `tools/diag/geometry_rows.py SCENE SEED --whole --before ...`.
+# ROWS defaults to the reference oracle (about 2 min a run on 2 cores, fast preset); the score
+# oracle and gb-nerf-unseen take about 7 min a run (the grid has no gb-nerf-unseen: give
+# weight 1, the built-in one, for its reference row). GB_NERF names the binary (default: cargo
+# xtask); copy it first for a long run.
+# Usage: [ROWS="reference-oracle score-oracle gb-nerf-unseen"] [GB_NERF=BIN] \
+#   tools/diag/geometry_weights.sh SCENE SEED WEIGHT [WEIGHT ...]
+#   e.g. tools/diag/geometry_weights.sh stairs 101 0.03 0.1 0.3
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+scene="$1" seed="$2"
+shift 2
+[ $# -gt 0 ] || { echo "geometry_weights.sh: give at least one WEIGHT" >&2; exit 2; }
+read -r -a rows <<< "${ROWS:-reference-oracle}"
+tools/diag/geometry_probe.sh "$scene" "$seed"
+for weight in "$@"; do
+    SEED="$seed" tools/diag/geometry_variants.sh "$scene" "w$weight" \
+        "depth_weight = $weight\nregion = \"crop\"" "${rows[@]}"
+done
+tools/diag/geometry_collect.sh "$scene" "$seed"
