@@ -4,7 +4,10 @@
 # bench/results/geometry-seed-SEED/figures/, and the pooled probe table into
 # bench/results/geometry-seed-SEED/probe-SCENE.json (tools/diag/probe_table.py). SEED defaults
 # to tuning seed 100.
-# Usage: tools/diag/geometry_collect.sh SCENE [SEED]
+# The table keeps its committed rows that no run in out/ gives again (probe_table.py --keep).
+# TABLE names another table in the same folder (geometry_weights.sh: probe-SCENE-weights.json),
+# so that rows of the same name but another meaning (an older binary's) are not replaced.
+# Usage: [TABLE=NAME.json] tools/diag/geometry_collect.sh SCENE [SEED]
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 scene="$1" seed="${2:-100}"
@@ -22,4 +25,4 @@ for run in "$grid"/*/; do
     cp "$run/probe/${view}_probe.png" "$dest/figures/$scene-$row-${view}_probe.png"
     cp "$run/probe/${view}_rays.svg" "$dest/figures/$scene-$row-${view}_rays.svg"
 done
-python3 tools/diag/probe_table.py "$dest/probe-$scene.json" "${args[@]}"
+python3 tools/diag/probe_table.py --keep "$dest/${TABLE:-probe-$scene.json}" "${args[@]}"

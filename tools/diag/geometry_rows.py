@@ -7,9 +7,11 @@ of the true depth, and beside each method the same seed's older run without the 
 from the `bench quality` reports given with --before, as tools/diag/geometry_table.py pools
 them). Standard library only.
 
-    tools/diag/geometry_rows.py SCENE SEED --before REPORT... [--whole]
+    tools/diag/geometry_rows.py SCENE SEED --before REPORT... [--whole] [--table NAME.json]
 
---whole adds the PSNR over the whole image (the term's cost outside the hole) as a last column.
+--whole adds the PSNR over the whole image (the term's cost outside the hole) as a last column,
+with the older run's beside it; --table reads another table of the seed's folder
+(geometry_weights.sh writes probe-SCENE-weights.json).
 """
 import argparse
 import json
@@ -22,6 +24,17 @@ from rank_methods import pool  # noqa: E402
 ORDER = ["none", "gb-nerf-unseen", "reference-oracle", "score-oracle"]
 
 
+def num(v):
+    """A value to two decimals, or a dash (older probe tables have no whole-image PSNR)."""
+    return "—" if v is None else f"{v:.2f}"
+
+
+def old_whole(old, seed):
+    """` (X)`: the older run's whole-image PSNR, when the reports have it."""
+    v = (old or {}).get("psnr", {}).get(seed)
+    return "" if v is None else f" ({v:.2f})"
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scene")
@@ -29,12 +42,14 @@ def main():
     ap.add_argument("--before", nargs="+", required=True)
     ap.add_argument("--results", default="bench/results")
     ap.add_argument("--whole", action="store_true", help="add the whole-image PSNR")
+    ap.add_argument("--table", help="the probe table's file name (default probe-SCENE.json)")
     a = ap.parse_args()
-    path = os.path.join(a.results, f"geometry-seed-{a.seed}", f"probe-{a.scene}.json")
+    table = a.table or f"probe-{a.scene}.json"
+    path = os.path.join(a.results, f"geometry-seed-{a.seed}", table)
     probe = json.load(open(path))
     before = pool(a.before).get(a.scene, {})
     rows = [r for r in ORDER if r in probe] + sorted(r for r in probe if r not in ORDER)
-    whole = " PSNR, whole image ↑ |" if a.whole else ""
+    whole = " PSNR, whole image ↑ (no term) |" if a.whole else ""
     print("| seed | scene | row | SSIM ↑ | ST-LPIPS ↓ | D-PSNR ↑ | true scale ↑ | hidden within 5% "
           "| no term: SSIM / ST-LPIPS / D-PSNR |" + whole)
     print("|---|---|---|---:|---:|---:|---:|---:|---|" + ("---:|" if a.whole else ""))
@@ -48,7 +63,7 @@ def main():
         print(f"| {a.seed} | `{a.scene}` | `{row}` | {p['ssim_bbox']:.3f} | {p['lpips_bbox']:.3f} | "
               f"{p['d_psnr_bbox']:.2f} | {p['disparity_scale.d_psnr_true_scale']:.2f} | "
               f"{100 * p['hidden.within_tolerance']:.0f}% | {was} |"
-              + (f" {p['psnr']:.2f} |" if a.whole else ""))
+              + (f" {num(p.get('psnr'))}{old_whole(old, a.seed)} |" if a.whole else ""))
 
 
 if __name__ == "__main__":

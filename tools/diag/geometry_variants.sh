@@ -38,5 +38,5 @@ for row in "${rows[@]}"; do
     printf '\n[geometry]\n%b\n' "$table" >> "$file"
     "${run[@]}" inpaint --scene "$scene_dir" --method "$file" --seed "$seed" --preset fast \
         --weights "${GB_TEST_DATA:-../shared}/weights" --export none --orbit-frames 0 --probe \
-        "${baseline[@]}" --out "$grid/$row-$variant"
+        ${baseline[@]+"${baseline[@]}"} --out "$grid/$row-$variant"
 done

@@ -4,9 +4,10 @@
 # built-in weight; finished runs are reused; its report lands beside that script's), then for
 # each WEIGHT the ROWS again with `[geometry] depth_weight = WEIGHT` on the guided crop
 # (tools/diag/geometry_variants.sh, variant `wWEIGHT`, the grid's none read as the unguided
-# field), then the probe table and pictures into bench/results/geometry-seed-SEED/
-# (tools/diag/geometry_collect.sh). Read the
-# rows with `tools/diag/geometry_rows.py SCENE SEED --whole --before ...`.
+# field), then the probe table and pictures into bench/results/geometry-seed-SEED/, the table
+# as probe-SCENE-weights.json (tools/diag/geometry_collect.sh; the seed's probe-SCENE.json holds
+# older runs under the same row names). Read the rows with
+# `tools/diag/geometry_rows.py SCENE SEED --table probe-SCENE-weights.json --whole --before ...`.
 # ROWS defaults to the reference oracle (about 2 min a run on 2 cores, fast preset); the score
 # oracle and gb-nerf-unseen take about 7 min a run (the grid has no gb-nerf-unseen: give
 # weight 1, the built-in one, for its reference row). GB_NERF names the binary (default: cargo
@@ -16,6 +17,8 @@
 #   e.g. tools/diag/geometry_weights.sh stairs 101 0.03 0.1 0.3
 set -euo pipefail
 cd "$(dirname "$0")/../.."
+# the build the README commands and CI share (.ci/run)
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/gb-nerf-rs/target}"
 scene="$1" seed="$2"
 shift 2
 [ $# -gt 0 ] || { echo "geometry_weights.sh: give at least one WEIGHT" >&2; exit 2; }
@@ -32,10 +35,10 @@ done
 if [ -n "${GB_NERF:-}" ]; then run=("$GB_NERF"); else run=(cargo xtask); fi
 oracle=()
 [ ${#oracles[@]} -gt 0 ] && oracle=(--oracle "$(IFS=,; echo "${oracles[*]}")")
-"${run[@]}" bench quality --scenes "$scene" --seeds "$seed" --methods none "${oracle[@]}" \
+"${run[@]}" bench quality --scenes "$scene" --seeds "$seed" --methods none ${oracle[@]+"${oracle[@]}"} \
     --probe --work out/issue49 --out "bench/results/geometry-seed-$seed" --reuse-finished
 for weight in "$@"; do
     SEED="$seed" tools/diag/geometry_variants.sh "$scene" "w$weight" \
         "depth_weight = $weight\nregion = \"crop\"" "${rows[@]}"
 done
-tools/diag/geometry_collect.sh "$scene" "$seed"
+TABLE="probe-$scene-weights.json" tools/diag/geometry_collect.sh "$scene" "$seed"

@@ -3,10 +3,11 @@
 table: per run, the hidden region's depth error and where its rays' weight lies, averaged over
 the test views, and the error of the observed surroundings.
 
-Usage: tools/diag/probe_table.py OUT.json LABEL=RUN_DIR [LABEL=RUN_DIR ...]
+Usage: tools/diag/probe_table.py [--keep] OUT.json LABEL=RUN_DIR [LABEL=RUN_DIR ...]
 
 Each RUN_DIR is a run folder (with probe/probe.json and metrics.json). Writes OUT.json and
-prints a Markdown table. Standard library only.
+prints a Markdown table. With --keep, the rows of an existing OUT.json whose label is not given
+stay (runs in out/ do not outlive a machine; the committed table does). Standard library only.
 """
 import json
 import sys
@@ -55,17 +56,22 @@ def pool(run: Path) -> dict:
         row["lpips_bbox"] = e.get("lpips_bbox")
         row["ssim_bbox"] = m.get("mean", {}).get("ssim_bbox")
         row["psnr"] = e.get("psnr")
+        row["lpips"] = e.get("lpips")
         row["train_seconds"] = m.get("train_seconds_this_run")
     return row
 
 
 def main() -> int:
-    if len(sys.argv) < 3:
+    args = sys.argv[1:]
+    keep = bool(args) and args[0] == "--keep"
+    if keep:
+        args = args[1:]
+    if len(args) < 2:
         print(__doc__, file=sys.stderr)
         return 2
-    out = Path(sys.argv[1])
-    rows = {}
-    for arg in sys.argv[2:]:
+    out = Path(args[0])
+    rows = json.loads(out.read_text()) if keep and out.is_file() else {}
+    for arg in args[1:]:
         label, _, run = arg.partition("=")
         if not run:
             print(f"probe_table.py: {arg}: expected LABEL=RUN_DIR", file=sys.stderr)
