@@ -400,10 +400,14 @@ mod tests {
         let mut renamed = none.clone();
         renamed.name = "mine".into();
         renamed.lambda_rgb = crate::method::Weight::Fixed(1.0);
-        let d = identity_difference(&stored, &identity(&renamed, None).unwrap(), false)
-            .unwrap()
-            .unwrap();
-        assert_eq!(d.field, "method.name");
+        let renamed = identity(&renamed, None).unwrap();
+        for strict in [false, true] {
+            // the name first, though method.lambda_rgb sorts before it
+            let d = identity_difference(&stored, &renamed, strict)
+                .unwrap()
+                .unwrap();
+            assert_eq!(d.field, "method.name", "strict: {strict}");
+        }
         let mut weighted = none.clone();
         weighted.lambda_rgb = crate::method::Weight::Fixed(1.0);
         let weighted = identity(&weighted, None).unwrap();

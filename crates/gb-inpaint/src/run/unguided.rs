@@ -160,15 +160,15 @@ pub(super) fn matching_baseline(
         ));
     }
     let stored = parts.meta.config(&path).map_err(|e| e.to_string())?;
-    if let Some(d) = preset_difference(&stored, config).map_err(|e| e.to_string())? {
+    if let Some(d) = preset_difference(&stored, config).map_err(|e| format!("its preset: {e}"))? {
         return Err(format!("its preset differs: {d}"));
     }
     let state: GuidedState = serde_json::from_value(parts.meta.extra.clone())
         .map_err(|_| "it was not written by a run of `inpaint`".to_string())?;
     let none = MethodConfig::builtin("none").map_err(|e| e.to_string())?;
     let id = identity(&none, None)?;
-    if let Some(d) =
-        identity_difference(&state.identity_toml, &id, true).map_err(|e| e.to_string())?
+    if let Some(d) = identity_difference(&state.identity_toml, &id, true)
+        .map_err(|e| format!("its run identity: {e}"))?
     {
         return Err(format!("it is not the built-in none: {d}"));
     }
