@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Issue 49's weight of the geometry term, tuned: on one scene and seed (a tuning seed, 100 or
 # 101), the grid of tools/diag/geometry_probe.sh (none and the oracles among ROWS at the
-# built-in weight; finished runs are reused; its report lands beside that script's), then for
+# built-in weight, through its ORACLES; finished runs are reused), then for
 # each WEIGHT the ROWS again with `[geometry] depth_weight = WEIGHT` on the guided crop
 # (tools/diag/geometry_variants.sh, variant `wWEIGHT`, the grid's none read as the unguided
 # field), then the probe table and pictures into bench/results/geometry-seed-SEED/, the table
@@ -23,8 +23,8 @@ scene="$1" seed="$2"
 shift 2
 [ $# -gt 0 ] || { echo "geometry_weights.sh: give at least one WEIGHT" >&2; exit 2; }
 read -r -a rows <<< "${ROWS:-reference-oracle}"
-# the grid: none and the oracles among ROWS at the built-in weight (as geometry_probe.sh, but
-# without an oracle no row needs: the score oracle alone takes 7 min)
+# the grid: none and the oracles among ROWS at the built-in weight (the score oracle alone
+# takes 7 min, so only those ROWS names)
 oracles=()
 for row in "${rows[@]}"; do
     case "$row" in
@@ -32,11 +32,7 @@ for row in "${rows[@]}"; do
         score-oracle) oracles+=(score) ;;
     esac
 done
-if [ -n "${GB_NERF:-}" ]; then run=("$GB_NERF"); else run=(cargo xtask); fi
-oracle=()
-[ ${#oracles[@]} -gt 0 ] && oracle=(--oracle "$(IFS=,; echo "${oracles[*]}")")
-"${run[@]}" bench quality --scenes "$scene" --seeds "$seed" --methods none ${oracle[@]+"${oracle[@]}"} \
-    --probe --work out/issue49 --out "bench/results/geometry-seed-$seed" --reuse-finished
+ORACLES="$(IFS=,; echo "${oracles[*]}")" tools/diag/geometry_probe.sh "$scene" "$seed"
 for weight in "$@"; do
     SEED="$seed" tools/diag/geometry_variants.sh "$scene" "w$weight" \
         "depth_weight = $weight\nregion = \"crop\"" "${rows[@]}"

@@ -181,11 +181,9 @@ impl std::fmt::Display for Difference {
 /// difference: another preset or method by name).
 fn name_first(prefix: &str, key: &str, a: &toml::Value, b: &toml::Value) -> Option<Difference> {
     match (a.get(key), b.get(key)) {
-        (Some(x), Some(y)) if x != y => Some(Difference {
-            field: format!("{prefix}.{key}"),
-            theirs: x.to_string(),
-            ours: y.to_string(),
-        }),
+        (Some(x), Some(y)) if x != y => {
+            Some((format!("{prefix}.{key}"), x.to_string(), y.to_string()).into())
+        }
         _ => first_difference(prefix, a, b).map(Difference::from),
     }
 }
@@ -237,11 +235,9 @@ pub fn identity_difference(
     let stored: toml::Value = toml::from_str(stored_toml)?;
     let name = |v: &toml::Value| v.get("method").and_then(|m| m.get("name")).cloned();
     let by_name = match (name(&stored), name(current)) {
-        (Some(a), Some(b)) if a != b => Some(Difference {
-            field: "method.name".to_string(),
-            theirs: a.to_string(),
-            ours: b.to_string(),
-        }),
+        (Some(a), Some(b)) if a != b => {
+            Some(("method.name".to_string(), a.to_string(), b.to_string()).into())
+        }
         _ => None,
     };
     Ok(by_name.or_else(|| {

@@ -442,9 +442,7 @@ pub fn run(spec: &RunSpec) -> Result<RunSummary, InpaintError> {
                 && pre.is_none()
                 && !resuming =>
         {
-            match unguided::matching_baseline(dir, &config, &devices)
-                .and_then(|b| unguided::baseline_field(b, &scene, &config, &devices))
-            {
+            match unguided::baseline_field(dir, &scene, &config, &devices) {
                 Ok(found) => Some(found),
                 Err(reason) => {
                     tracing::info!(

@@ -14,7 +14,7 @@ use std::time::Instant;
 
 use gb_core::Devices;
 use gb_nerf::scene::Scene;
-use gb_nerf::train::checkpoint::{load, CheckpointParts};
+use gb_nerf::train::checkpoint::load;
 use gb_nerf::train::{NerfConfig, Trainer};
 
 use crate::error::InpaintError;
@@ -32,7 +32,7 @@ pub(super) struct UnguidedDepth {
 }
 
 /// The geometry term's targets: the unguided field's depth through the pixels `method`
-/// holds. The field is `baseline`'s checkpoint when [`matching_baseline`] accepts it, else
+/// holds. The field is `baseline`'s checkpoint when [`baseline_field`] accepts it, else
 /// trained here from the run's `config` with the built-in `none` (the same seed, so the same
 /// initialisation and rays as `--method none`).
 pub(super) fn unguided_depth(
@@ -45,9 +45,7 @@ pub(super) fn unguided_depth(
 ) -> Result<UnguidedDepth, InpaintError> {
     let start = Instant::now();
     let reused = match baseline {
-        Some(dir) => match matching_baseline(dir, config, devices)
-            .and_then(|b| baseline_field(b, scene, config, devices))
-        {
+        Some(dir) => match baseline_field(dir, scene, config, devices) {
             Ok((field, _, path)) => Some((field, path)),
             Err(reason) => {
                 tracing::info!(
@@ -93,44 +91,19 @@ pub(super) fn unguided_depth(
     })
 }
 
-/// A `--baseline` run's finished checkpoint that [`matching_baseline`] accepted: its path, its
-/// parts (the guided state still in them) and that state.
-pub(super) struct Baseline {
-    pub path: PathBuf,
-    pub parts: CheckpointParts,
-    pub state: GuidedState,
-}
-
-/// The field of an accepted baseline: the restored reconstruction trainer (scene and training
-/// data checked here), the baseline's counters and its checkpoint's path. The unguided pass
-/// renders its depth; a run that trains exactly as `none` (an `auto` choice of zero weights)
-/// wraps it in its own method.
+/// The field of `dir` (a run folder, or its `renders/`) when it holds a finished checkpoint
+/// of the built-in `none` with no reference, with `config` (any cadence of checkpoints; the
+/// step count is the run's), trained on the same backend (its `metrics.json`'s `device`) on
+/// the same scene and training data (checked as the field is restored): the restored
+/// reconstruction trainer, the baseline's counters and its checkpoint's path. Otherwise the
+/// first thing that differs, in words. The unguided pass renders its depth; a run that trains
+/// exactly as `none` (an `auto` choice of zero weights) wraps it in its own method.
 pub(super) fn baseline_field(
-    baseline: Baseline,
+    dir: &Path,
     scene: &Scene,
     config: &NerfConfig,
     devices: &Devices,
 ) -> Result<(Trainer, RunTotals, PathBuf), String> {
-    let Baseline {
-        path,
-        mut parts,
-        state,
-    } = baseline;
-    parts.meta.extra = serde_json::Value::Null;
-    let nerf = Trainer::resume_from(scene, &path, parts, config.clone(), devices)
-        .map_err(|e| e.to_string())?;
-    Ok((nerf, state.totals, path))
-}
-
-/// `dir`'s checkpoint, when `dir` (a run folder, or its `renders/`) holds a finished
-/// checkpoint of the built-in `none` with no reference, with `config` (any cadence of
-/// checkpoints; the step count is the run's), trained on the same backend (its
-/// `metrics.json`'s `device`); the training data is checked when the field is restored. Otherwise the first thing that differs, in words.
-pub(super) fn matching_baseline(
-    dir: &Path,
-    config: &NerfConfig,
-    devices: &Devices,
-) -> Result<Baseline, String> {
     let run = if dir.file_name().is_some_and(|n| n == "renders") {
         dir.parent().unwrap_or(dir)
     } else {
@@ -152,7 +125,7 @@ pub(super) fn matching_baseline(
             devices.name()
         ));
     }
-    let parts = load(&path).map_err(|e| e.to_string())?;
+    let mut parts = load(&path).map_err(|e| e.to_string())?;
     if parts.meta.step != config.train.steps {
         return Err(format!(
             "its checkpoint is at step {} of this run's {}",
@@ -163,7 +136,7 @@ pub(super) fn matching_baseline(
     if let Some(d) = preset_difference(&stored, config).map_err(|e| format!("its preset: {e}"))? {
         return Err(format!("its preset differs: {d}"));
     }
-    let state: GuidedState = serde_json::from_value(parts.meta.extra.clone())
+    let state: GuidedState = serde_json::from_value(parts.meta.extra.take())
         .map_err(|_| "it was not written by a run of `inpaint`".to_string())?;
     let none = MethodConfig::builtin("none").map_err(|e| e.to_string())?;
     let id = identity(&none, None)?;
@@ -172,5 +145,7 @@ pub(super) fn matching_baseline(
     {
         return Err(format!("it is not the built-in none: {d}"));
     }
-    Ok(Baseline { path, parts, state })
+    let nerf = Trainer::resume_from(scene, &path, parts, config.clone(), devices)
+        .map_err(|e| e.to_string())?;
+    Ok((nerf, state.totals, path))
 }
