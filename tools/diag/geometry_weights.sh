@@ -5,8 +5,9 @@
 # each WEIGHT the ROWS again with `[geometry] depth_weight = WEIGHT` on the guided crop
 # (tools/diag/geometry_variants.sh, variant `wWEIGHT`, the grid's none read as the unguided
 # field), then the probe table and pictures into bench/results/geometry-seed-SEED/, the table
-# as probe-SCENE-weights.json (tools/diag/geometry_collect.sh; the seed's probe-SCENE.json holds
-# older runs under the same row names). Read the rows with
+# as probe-SCENE-weights.json and the pictures in figures/probe-SCENE-weights/
+# (tools/diag/geometry_collect.sh; the seed's probe-SCENE.json and figures/ hold older runs
+# under the same row names). Pooled over the cells: tools/diag/geometry_weights_pool.py. Read the rows with
 # `tools/diag/geometry_rows.py SCENE SEED --table probe-SCENE-weights.json --whole --before ...`.
 # ROWS defaults to the reference oracle (about 2 min a run on 2 cores, fast preset); the score
 # oracle and gb-nerf-unseen take about 7 min a run (the grid has no gb-nerf-unseen: give
