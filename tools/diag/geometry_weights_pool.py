@@ -2,7 +2,8 @@
 """Issue 49's weight of the geometry term, judged pooled: for each weight, each tuning cell's
 row of bench/results/geometry-seed-SEED/probe-SCENE-weights.json (tools/diag/geometry_weights.sh)
 against the same cell's `none`, then the mean and sd over the cells. The built-in weight (1) is
-the row itself (`reference-oracle`), another weight W its variant (`reference-oracle-wW`).
+the row itself (`reference-oracle`) or, for a row the grid does not run (`gb-nerf-unseen`), its
+variant `ROW-w1`; another weight W is its variant (`reference-oracle-wW`).
 
 Columns, each the row minus none: mask-box SSIM (up is better), ST-LPIPS (down is better),
 D-PSNR (the bar: within -0.5 dB) and the PSNR over the whole image (the term's cost outside
@@ -22,9 +23,13 @@ METRICS = [("ssim_bbox", "SSIM"), ("lpips_bbox", "ST-LPIPS"), ("d_psnr_bbox", "D
            ("psnr", "whole PSNR")]
 
 
-def row_name(row, weight):
-    """The probe table's row for a weight: the built-in weight 1 is the row itself."""
-    return row if float(weight) == 1.0 else f"{row}-w{weight}"
+def row_name(row, weight, table):
+    """The probe table's row for a weight: the built-in weight 1 is the row itself when the
+    grid ran it (the oracles), else its variant `ROW-w1` (gb-nerf-unseen, which the grid does
+    not run)."""
+    if float(weight) == 1.0 and row in table:
+        return row
+    return f"{row}-w{weight}"
 
 
 def mean_sd(values):
@@ -53,9 +58,9 @@ def main():
     print(f"| weight | cell | {' | '.join(f'{label} − none' for _, label in METRICS)} |")
     print("|---|---|" + "---:|" * len(METRICS))
     for weight in a.weights:
-        name = row_name(a.row, weight)
         pooled = {key: [] for key, _ in METRICS}
         for cell, table in tables.items():
+            name = row_name(a.row, weight, table)
             if name not in table or "none" not in table:
                 print(f"| {weight} | {cell} | (no `{name}`) |")
                 continue
