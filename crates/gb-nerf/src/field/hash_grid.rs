@@ -213,8 +213,9 @@ pub struct HashGrid {
 }
 
 impl HashGrid {
-    /// Encodes points from precomputed lookups: `[points, levels * features]`.
-    pub fn encode_lookups(&self, lookups: &HashLookups) -> Tensor<2> {
+    /// Encodes points from precomputed lookups: `[points, levels * features]`. The lookups'
+    /// rows and weights move into the tensors (no copy of `points * levels * 8` entries).
+    pub fn encode_lookups(&self, lookups: HashLookups) -> Tensor<2> {
         let table = self.table.val();
         let device = table.device();
         let (n, l, f) = (
@@ -225,14 +226,8 @@ impl HashGrid {
         if n == 0 {
             return Tensor::zeros([0, l * f], &device);
         }
-        let rows = Tensor::<1, Int>::from_data(
-            TensorData::new(lookups.rows.clone(), [n * l * 8]),
-            &device,
-        );
-        let w = Tensor::<4>::from_data(
-            TensorData::new(lookups.weights.clone(), [n, l, 8, 1]),
-            &device,
-        );
+        let rows = Tensor::<1, Int>::from_data(TensorData::new(lookups.rows, [n * l * 8]), &device);
+        let w = Tensor::<4>::from_data(TensorData::new(lookups.weights, [n, l, 8, 1]), &device);
         let gathered = gb_core::gather_rows(table, rows).reshape([n, l, 8, f]);
         (gathered * w).sum_dim(2).reshape([n, l * f])
     }
@@ -240,7 +235,7 @@ impl HashGrid {
     /// Encodes points in `[0, 1]^3` with lookups computed on the CPU:
     /// `[points, levels * features]`.
     pub fn encode(&self, points: &[[f32; 3]]) -> Tensor<2> {
-        self.encode_lookups(&hash_lookups(&self.config, points))
+        self.encode_lookups(hash_lookups(&self.config, points))
     }
 
     /// Encodes points `[N, 3]` (on the table's device) with the lookups computed on the
