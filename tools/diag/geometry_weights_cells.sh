@@ -20,11 +20,8 @@ for cell in "${cells[@]}"; do
     tools/diag/geometry_weights.sh "$scene" "$seed" "$@" || failed+=("$cell")
 done
 echo "=== done $(date -u +%FT%TZ)"
-weights=("$@")
-has_one=0
-for w in "${weights[@]}"; do [ "$w" = 1 ] && has_one=1; done
-[ "$has_one" = 1 ] || weights+=(1)
-python3 tools/diag/geometry_weights_pool.py --row "${rows[0]}" --weights "${weights[@]}" \
+# the built-in weight 1 always (the pool reads a weight given twice once)
+python3 tools/diag/geometry_weights_pool.py --row "${rows[0]}" --weights "$@" 1 \
     --cells "${cells[@]}"
 if [ ${#failed[@]} -gt 0 ]; then
     echo "geometry_weights_cells.sh: these cells failed: ${failed[*]}" >&2

@@ -57,7 +57,12 @@ def main():
             print(f"(no {path})")
     print(f"| weight | cell | {' | '.join(f'{label} − none' for _, label in METRICS)} |")
     print("|---|---|" + "---:|" * len(METRICS))
-    for weight in a.weights:
+    # each weight once, in the order given ("1" and "1.0" are the same weight)
+    weights = []
+    for w in a.weights:
+        if all(float(w) != float(seen) for seen in weights):
+            weights.append(w)
+    for weight in weights:
         pooled = {key: [] for key, _ in METRICS}
         for cell, table in tables.items():
             name = row_name(a.row, weight, table)
