@@ -1,17 +1,26 @@
-//! Row lookups whose backward pass runs in parallel on every backend.
+//! Row lookups with a fast backward pass on every backend.
 //!
 //! `Tensor::select(0, rows)` is the obvious row lookup, but under autodiff its backward is
 //! `select_assign`, which the cubecl backends (wgpu) run with one thread per *column*, each
 //! looping over every index: for a hash table of 2 features that is 2 threads for millions
 //! of rows. A `gather` along dim 0 with the indices expanded over the columns computes the
 //! same values, and its backward is a scatter-add with one thread per element.
+//!
+//! flex keeps `select`: there the gather needs its indices expanded over the columns and
+//! copied (`rows * columns` integers, about 160 MB for a `fast` batch of the hash grid), while
+//! `select`'s backward adds whole rows: the same values and gradients, in less time. ndarray
+//! keeps the gather: its `select` backward walks a dynamic-rank view per index.
 
 use burn::tensor::{Int, Tensor};
 
 /// Rows `rows` of `values` (`[N, C...]`), as `[rows.len(), C...]`: the values of
-/// `values.select(0, rows)`, through a `gather` whose backward is parallel (module docs).
-/// Repeated rows are allowed; their gradients add up.
+/// `values.select(0, rows)`, through a `gather` whose backward is parallel, or on flex
+/// `select` itself (module docs). Repeated rows are allowed; their gradients add up.
 pub fn gather_rows<const D: usize>(values: Tensor<D>, rows: Tensor<1, Int>) -> Tensor<D> {
+    // device equality ignores autodiff: true for flex's plain and autodiff devices
+    if values.device() == burn::tensor::Device::flex() {
+        return values.select(0, rows);
+    }
     let k = rows.dims()[0];
     let mut index_shape = [1usize; D];
     index_shape[0] = k;
