@@ -11,14 +11,13 @@
 //! `select`'s backward adds whole rows: the same values and gradients, in less time. ndarray
 //! keeps the gather: its `select` backward walks a dynamic-rank view per index.
 
-use burn::tensor::{Int, Tensor};
+use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 
 /// Rows `rows` of `values` (`[N, C...]`), as `[rows.len(), C...]`: the values of
 /// `values.select(0, rows)`, through a `gather` whose backward is parallel, or on flex
 /// `select` itself (module docs). Repeated rows are allowed; their gradients add up.
 pub fn gather_rows<const D: usize>(values: Tensor<D>, rows: Tensor<1, Int>) -> Tensor<D> {
-    // device equality ignores autodiff: true for flex's plain and autodiff devices
-    if values.device() == burn::tensor::Device::flex() {
+    if is_flex(&values.device()) {
         return values.select(0, rows);
     }
     let k = rows.dims()[0];
@@ -28,6 +27,24 @@ pub fn gather_rows<const D: usize>(values: Tensor<D>, rows: Tensor<1, Int>) -> T
     out_shape[0] = k;
     let index = rows.reshape(index_shape).expand(out_shape);
     values.gather(0, index)
+}
+
+/// The row indices `rows` as a tensor on `device`, for [`gather_rows`]: `i64` on flex, which
+/// reads such indices in place (its default integer type would cost a converted copy of every
+/// index), the device's default integer type elsewhere.
+pub fn row_indices(rows: Vec<i64>, device: &Device) -> Tensor<1, Int> {
+    let n = rows.len();
+    let data = TensorData::new(rows, [n]);
+    if is_flex(device) {
+        Tensor::from_data(data, (device, DType::I64))
+    } else {
+        Tensor::from_data(data, device)
+    }
+}
+
+/// Whether `device` is flex, plain or autodiff (device equality ignores autodiff).
+fn is_flex(device: &Device) -> bool {
+    *device == Device::flex()
 }
 
 #[cfg(test)]
@@ -82,6 +99,28 @@ mod tests {
             // row 4 and 5 are never looked up: zero gradient; row 1 three times
             assert!(g_gather[4 * 5..6 * 5].iter().all(|&g| g == 0.0), "{kind}");
             assert!(g_gather[5..10].iter().any(|&g| g != 0.0), "{kind}");
+        }
+    }
+
+    /// `row_indices` gives flex `i64` indices (read in place) and every backend the same rows.
+    #[test]
+    fn row_indices_are_i64_on_flex_and_look_up_the_same_rows() {
+        let rows: Vec<i64> = vec![2, 0, 2, 3];
+        for kind in test_backends() {
+            let device = kind.device();
+            let index = row_indices(rows.clone(), &device);
+            if kind == crate::BackendKind::Flex {
+                assert_eq!(index.dtype(), DType::I64, "{kind}");
+            }
+            let values = Tensor::<2>::from_data(
+                TensorData::new((0..8).map(|v| v as f32).collect::<Vec<_>>(), [4, 2]),
+                &device,
+            );
+            let out = gather_rows(values, index)
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap();
+            assert_eq!(out, [4.0, 5.0, 0.0, 1.0, 4.0, 5.0, 6.0, 7.0], "{kind}");
         }
     }
 

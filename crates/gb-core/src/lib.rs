@@ -33,7 +33,7 @@ pub use backend::{heavy_test_backends, test_backends, BackendKind, Devices};
 pub use image_io::{
     image_size, read_gray, read_rgb, write_gray_png, write_rgb_png, ImageIoError, RgbImage,
 };
-pub use indexing::gather_rows;
+pub use indexing::{gather_rows, row_indices};
 pub use npy_guard::check_npy_header;
 pub use precision::{Precision, PrecisionError};
 pub use psnr::psnr_from_mse;

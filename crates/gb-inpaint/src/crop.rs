@@ -24,7 +24,7 @@
 
 use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
-use burn::tensor::{Device, Int, Tensor, TensorData};
+use burn::tensor::{Device, Tensor, TensorData};
 use gb_core::{RgbImage, TensorValuesError};
 use gb_diffusion::distill::prior_input::bilinear_resize;
 use gb_diffusion::distill::{LatentEncoder, PriorInputMode};
@@ -283,8 +283,8 @@ fn render_pixels(
 }
 
 /// `[N, C]` values of the rows `rows` of an `R x R` image, other rows zero, as
-/// `[1, C, R, R]` (differentiable: a gather with a parallel backward,
-/// [`gb_core::gather_rows`]).
+/// `[1, C, R, R]` (differentiable: [`gb_core::gather_rows`], whose backward is fast on every
+/// backend).
 fn scatter_rows(values: Tensor<2>, rows: &[usize], r: usize) -> Tensor<4> {
     let device = values.device();
     let [n, c] = values.dims();
@@ -293,10 +293,7 @@ fn scatter_rows(values: Tensor<2>, rows: &[usize], r: usize) -> Tensor<4> {
         map[row] = k as i64;
     }
     let padded = Tensor::cat(vec![values, Tensor::zeros([1, c], &device)], 0);
-    let dense = gb_core::gather_rows(
-        padded,
-        Tensor::<1, Int>::from_data(TensorData::new(map, [r * r]), &device),
-    );
+    let dense = gb_core::gather_rows(padded, gb_core::row_indices(map, &device));
     dense.reshape([r, r, c]).permute([2, 0, 1]).unsqueeze_dim(0)
 }
 

@@ -31,7 +31,7 @@
 //! tested against.
 
 use burn::module::{Module, Param};
-use burn::tensor::{DType, Device, Distribution, Int, Tensor, TensorData};
+use burn::tensor::{Device, Distribution, Int, Tensor, TensorData};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -226,14 +226,7 @@ impl HashGrid {
         if n == 0 {
             return Tensor::zeros([0, l * f], &device);
         }
-        let rows = TensorData::new(lookups.rows, [n * l * 8]);
-        // flex reads `i64` indices in place; its default integer type would cost a converted
-        // copy of every row (the other backends keep their default)
-        let rows = if device == Device::flex() {
-            Tensor::<1, Int>::from_data(rows, (&device, DType::I64))
-        } else {
-            Tensor::<1, Int>::from_data(rows, &device)
-        };
+        let rows = gb_core::row_indices(lookups.rows, &device);
         let w = Tensor::<4>::from_data(TensorData::new(lookups.weights, [n, l, 8, 1]), &device);
         let gathered = gb_core::gather_rows(table, rows).reshape([n, l, 8, f]);
         (gathered * w).sum_dim(2).reshape([n, l * f])

@@ -8,7 +8,7 @@ pub mod rays;
 pub mod termination;
 pub mod volume;
 
-use burn::tensor::{Int, Tensor, TensorData};
+use burn::tensor::{Tensor, TensorData};
 use gb_core::TensorValuesError;
 use rand::Rng;
 
@@ -21,8 +21,8 @@ pub use profile::{render_profiles, RayProfile};
 pub use volume::{composite, Background, VolumeOutput};
 
 /// Expands per-sample values `[M, C]` of the evaluated samples to the dense `[R * S, C]`
-/// layout, with zeros for the skipped samples (differentiable: a gather, whose backward is
-/// parallel on every backend; see [`gb_core::gather_rows`]).
+/// layout, with zeros for the skipped samples (differentiable: [`gb_core::gather_rows`], whose
+/// backward is fast on every backend).
 fn expand_dense<const D: usize>(values: Tensor<D>, samples: &SampleSet) -> Tensor<D> {
     let device = values.device();
     let m = samples.slots.len();
@@ -34,10 +34,7 @@ fn expand_dense<const D: usize>(values: Tensor<D>, samples: &SampleSet) -> Tenso
     let mut zero_shape = values.dims();
     zero_shape[0] = 1;
     let padded = Tensor::cat(vec![values, Tensor::zeros(zero_shape, &device)], 0);
-    gb_core::gather_rows(
-        padded,
-        Tensor::<1, Int>::from_data(TensorData::new(map, [dense]), &device),
-    )
+    gb_core::gather_rows(padded, gb_core::row_indices(map, &device))
 }
 
 /// Most samples evaluated by one field call. A training batch of the `paper` preset (4096
