@@ -54,7 +54,8 @@ mod tests {
     use super::*;
     use crate::backend::test_backends;
 
-    /// Values and gradients of `gather_rows` against `select`, with repeated rows.
+    /// Values and gradients of `gather_rows` against `select`, with repeated rows (on flex
+    /// `gather_rows` is `select` itself: the comparison bites on ndarray and wgpu).
     #[test]
     fn gather_rows_matches_select_in_values_and_gradients() {
         let rows: Vec<i64> = vec![3, 0, 3, 7, 1, 1, 1, 6, 2, 3, 0];
