@@ -7,7 +7,8 @@
 # field), then the probe table and pictures into bench/results/geometry-seed-SEED/, the table
 # as probe-SCENE-weights.json and the pictures in figures/probe-SCENE-weights/
 # (tools/diag/geometry_collect.sh; the seed's probe-SCENE.json and figures/ hold older runs
-# under the same row names). Pooled over the cells: tools/diag/geometry_weights_pool.py. Read the rows with
+# under the same row names). Pooled over the cells: tools/diag/geometry_weights_pool.py. Read
+# the rows with
 # `tools/diag/geometry_rows.py SCENE SEED --table probe-SCENE-weights.json --whole --before ...`.
 # ROWS defaults to the reference oracle (about 2 min a run on 2 cores, fast preset); the score
 # oracle and gb-nerf-unseen take about 7 min a run (the grid has no gb-nerf-unseen: give
