@@ -136,6 +136,11 @@ pub fn disparity_map(depth: &[f32], width: usize, height: usize) -> ScalarMap {
 
 /// The reference's 8-bit, 3-channel rendering of a disparity map (see the module docs).
 pub fn disparity_to_rgb8(disp: &ScalarMap) -> Result<RgbImage, MetricError> {
+    Ok(disparity_to_rgb8_over(disp, max_disparity(disp)?))
+}
+
+/// An error when `disp`'s buffer does not hold `width * height` values.
+fn check_size(disp: &ScalarMap) -> Result<(), MetricError> {
     let expected = disp.width * disp.height;
     if disp.data.len() != expected {
         return Err(MetricError::BadBuffer {
@@ -147,13 +152,22 @@ pub fn disparity_to_rgb8(disp: &ScalarMap) -> Result<RgbImage, MetricError> {
             channels: 1,
         });
     }
-    let clean = |v: f32| {
-        if v.is_finite() && v > 0.0 {
-            f64::from(v)
-        } else {
-            0.0
-        }
-    };
+    Ok(())
+}
+
+/// Disparity as D-PSNR reads it: non-finite and negative values are 0.
+fn clean(v: f32) -> f64 {
+    if v.is_finite() && v > 0.0 {
+        f64::from(v)
+    } else {
+        0.0
+    }
+}
+
+/// The largest disparity of `disp` ([`clean`]), checked against its buffer's size; an error
+/// when it is not positive.
+fn max_disparity(disp: &ScalarMap) -> Result<f64, MetricError> {
+    check_size(disp)?;
     let max = disp.data.iter().map(|&v| clean(v)).fold(0.0, f64::max);
     if max <= 0.0 {
         return Err(MetricError::InvalidInput {
@@ -161,22 +175,47 @@ pub fn disparity_to_rgb8(disp: &ScalarMap) -> Result<RgbImage, MetricError> {
             reason: "its maximum is not positive, so it cannot be normalised by it".into(),
         });
     }
-    let mut data = Vec::with_capacity(expected * 3);
+    Ok(max)
+}
+
+/// The 8-bit rendering of `disp` divided by `max` instead of its own maximum (steps 1, 3 and
+/// 4 of the module docs); values above `max` clip to 255.
+fn disparity_to_rgb8_over(disp: &ScalarMap, max: f64) -> RgbImage {
+    let mut data = Vec::with_capacity(disp.data.len() * 3);
     for &v in &disp.data {
         let q = (255.0 * (clean(v) / max).clamp(0.0, 1.0)).floor() as u8;
         let f = f32::from(q) / 255.0;
         data.extend_from_slice(&[f, f, f]);
     }
-    Ok(RgbImage {
+    RgbImage {
         width: disp.width,
         height: disp.height,
         data,
-    })
+    }
 }
 
 /// D-PSNR: PSNR between the 8-bit renderings of two disparity maps over `region`.
 pub fn d_psnr(pred: &ScalarMap, gt: &ScalarMap, region: &Region) -> Result<f64, MetricError> {
     psnr(&disparity_to_rgb8(pred)?, &disparity_to_rgb8(gt)?, region)
+}
+
+/// D-PSNR on the true scale (gb-nerf-rs's addition; [`d_psnr`] is the paper's): both maps
+/// divided by the ground truth's maximum, then rendered and compared as D-PSNR. D-PSNR divides
+/// the prediction by its own maximum, so where a run renders the view's nearest point, even
+/// far outside `region`, rescales every pixel of it; this one measures the error in `region`
+/// alone.
+pub fn d_psnr_true_scale(
+    pred: &ScalarMap,
+    gt: &ScalarMap,
+    region: &Region,
+) -> Result<f64, MetricError> {
+    let max = max_disparity(gt)?;
+    check_size(pred)?;
+    psnr(
+        &disparity_to_rgb8_over(pred, max),
+        &disparity_to_rgb8_over(gt, max),
+        region,
+    )
 }
 
 #[cfg(test)]
@@ -200,6 +239,69 @@ mod tests {
         // 255 * 0.5 = 127.5 -> 127 (truncated), 255 * 0.4995 = 127.37 -> 127.
         assert_eq!(u8s, vec![255, 127, 127, 0]);
         assert_eq!(img.data[0..3], [1.0, 1.0, 1.0]);
+    }
+
+    #[test]
+    fn the_true_scale_ignores_a_nearer_point_outside_the_region() {
+        // the truth and a prediction equal to it inside the first three pixels, whose only
+        // difference is a nearer point in the fourth: D-PSNR rescales the whole map by it
+        let gt = ScalarMap {
+            width: 4,
+            height: 1,
+            data: vec![0.2, 0.4, 0.6, 0.8],
+        };
+        let pred = ScalarMap {
+            data: vec![0.2, 0.4, 0.6, 1.6],
+            ..gt.clone()
+        };
+        let inside = Region::BBox {
+            x0: 0,
+            y0: 0,
+            x1: 3,
+            y1: 1,
+        };
+        assert_eq!(
+            d_psnr_true_scale(&pred, &gt, &inside).unwrap(),
+            f64::INFINITY
+        );
+        // own scale: 0.2 / 1.6 = 0.125 -> 31/255 against 0.25 -> 63/255, and so on
+        let own = d_psnr(&pred, &gt, &inside).unwrap();
+        let mse = [(31.0 - 63.0_f64), (63.0 - 127.0), (95.0 - 191.0)]
+            .iter()
+            .map(|d| (d / 255.0).powi(2))
+            .sum::<f64>()
+            / 3.0;
+        assert!((own - -10.0 * mse.log10()).abs() < 1e-3, "{own}");
+        // the nearer point itself is clipped to the truth's maximum: 255 against 255
+        let at = Region::BBox {
+            x0: 3,
+            y0: 0,
+            x1: 4,
+            y1: 1,
+        };
+        assert_eq!(d_psnr_true_scale(&pred, &gt, &at).unwrap(), f64::INFINITY);
+        // a depth error inside the region still counts: 0.4 -> 0.3 (127 -> 95)
+        let off = ScalarMap {
+            data: vec![0.2, 0.3, 0.6, 0.8],
+            ..gt.clone()
+        };
+        let want = -10.0 * ((32.0_f64 / 255.0).powi(2) / 3.0).log10();
+        let got = d_psnr_true_scale(&off, &gt, &inside).unwrap();
+        assert!((got - want).abs() < 1e-3, "{got} against {want}");
+        // an all-zero prediction is a number on this scale, a short buffer an error
+        let zero = ScalarMap {
+            data: vec![0.0; 4],
+            ..gt.clone()
+        };
+        assert!(d_psnr_true_scale(&zero, &gt, &inside).unwrap() < 10.0);
+        let short = ScalarMap {
+            data: vec![0.2; 3],
+            ..gt.clone()
+        };
+        assert!(matches!(
+            d_psnr_true_scale(&short, &gt, &inside),
+            Err(MetricError::BadBuffer { .. })
+        ));
     }
 
     #[test]

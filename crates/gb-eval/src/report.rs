@@ -2,7 +2,7 @@
 //!
 //! # Keys
 //! One key per metric and region: `psnr`, `ssim`, `lpips`, `fid`, `nima`, `brisque`, `d_fid`,
-//! `d_psnr`, each optionally suffixed `_bbox` (over the mask's bounding box) or `_mask` (over the
+//! `d_psnr`, `d_psnr_true` (D-PSNR on the true scale, not in the paper), each optionally suffixed `_bbox` (over the mask's bounding box) or `_mask` (over the
 //! mask's pixels). A metric fills the keys it computes with [`Outcome::Value`], or with
 //! [`Outcome::Unavailable`] and the reason (missing weights, images too small, ...): a report
 //! never holds a made-up number.
@@ -20,8 +20,8 @@
 //!
 //! # Markdown
 //! One row per region (all pixels, mask bounding box, mask), one column per metric in the
-//! paper's order, PSNR, SSIM, FID, NIMA, BRISQUE, D-FID, D-PSNR, then LPIPS (which the paper
-//! does not report), with arrows for the better direction; `n/a` marks an unavailable metric,
+//! paper's order, PSNR, SSIM, FID, NIMA, BRISQUE, D-FID, D-PSNR, then D-PSNR on the true scale
+//! and LPIPS (which the paper does not report), with arrows for the better direction; `n/a` marks an unavailable metric,
 //! whose reason follows the table; `-` a metric that was not run.
 //!
 //! # Adding a metric
@@ -86,8 +86,9 @@ pub struct Column {
     pub higher_is_better: bool,
 }
 
-/// The table's columns in the paper's order (LPIPS, not in the paper, last).
-pub const COLUMNS: [Column; 8] = [
+/// The table's columns in the paper's order (D-PSNR on the true scale and LPIPS, not in the
+/// paper, last).
+pub const COLUMNS: [Column; 9] = [
     Column {
         key: "psnr",
         title: "PSNR",
@@ -121,6 +122,11 @@ pub const COLUMNS: [Column; 8] = [
     Column {
         key: "d_psnr",
         title: "D-PSNR",
+        higher_is_better: true,
+    },
+    Column {
+        key: "d_psnr_true",
+        title: "D-PSNR (true scale)",
         higher_is_better: true,
     },
     Column {
@@ -295,7 +301,7 @@ fn format_value(key: &str, v: f64) -> String {
         return if v > 0.0 { "inf".into() } else { "-inf".into() };
     }
     match key {
-        "psnr" | "d_psnr" | "fid" | "d_fid" | "brisque" => format!("{v:.2}"),
+        "psnr" | "d_psnr" | "d_psnr_true" | "fid" | "d_fid" | "brisque" => format!("{v:.2}"),
         "nima" => format!("{v:.3}"),
         _ => format!("{v:.4}"),
     }
@@ -325,7 +331,17 @@ mod tests {
         let keys: Vec<&str> = COLUMNS.iter().map(|c| c.key).collect();
         assert_eq!(
             keys,
-            ["psnr", "ssim", "fid", "nima", "brisque", "d_fid", "d_psnr", "lpips"]
+            [
+                "psnr",
+                "ssim",
+                "fid",
+                "nima",
+                "brisque",
+                "d_fid",
+                "d_psnr",
+                "d_psnr_true",
+                "lpips"
+            ]
         );
         let mut r = EvalReport::new(&["a.png".into()]);
         r.set("nima", 5.4321);
@@ -333,12 +349,12 @@ mod tests {
         let md = r.to_markdown();
         assert!(
             md.lines().next().unwrap().starts_with(
-                "| region | PSNR ↑ | SSIM ↑ | FID ↓ | NIMA ↑ | BRISQUE ↓ | D-FID ↓ | D-PSNR ↑ | LPIPS ↓ |"
+                "| region | PSNR ↑ | SSIM ↑ | FID ↓ | NIMA ↑ | BRISQUE ↓ | D-FID ↓ | D-PSNR ↑ | D-PSNR (true scale) ↑ | LPIPS ↓ |"
             ),
             "{md}"
         );
         assert!(
-            md.contains("| full image | - | - | - | 5.432 | 20.00 | - | - | - |"),
+            md.contains("| full image | - | - | - | 5.432 | 20.00 | - | - | - | - |"),
             "{md}"
         );
     }
@@ -352,7 +368,15 @@ mod tests {
         let md = r.to_markdown();
         let header = md.lines().next().unwrap();
         let order: Vec<usize> = [
-            "PSNR", "SSIM", "FID", "NIMA", "BRISQUE", "D-FID", "D-PSNR", "LPIPS",
+            "PSNR",
+            "SSIM",
+            "FID",
+            "NIMA",
+            "BRISQUE",
+            "D-FID",
+            "D-PSNR",
+            "D-PSNR (true scale)",
+            "LPIPS",
         ]
         .iter()
         .map(|t| header.find(&format!(" {t} ")).unwrap())

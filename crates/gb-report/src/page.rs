@@ -180,7 +180,8 @@ pub fn render_html(r: &Report) -> String {
     h.push_str("<h2>Metrics</h2>\n");
     h.push_str(&format!(
         "<p class=\"note\">{} test view(s); gb-eval conventions (PSNR/SSIM as scikit-image, \
-         ST-LPIPS AlexNet shift-tolerant, D-PSNR on 8-bit max-normalised disparity). \
+         ST-LPIPS AlexNet shift-tolerant, D-PSNR on 8-bit max-normalised disparity, its true \
+         scale with both maps over the truth's maximum). \
          Hover an n/a cell for its reason.</p>\n",
         r.eval.n_images
     ));

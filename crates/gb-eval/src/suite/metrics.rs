@@ -4,7 +4,7 @@ use gb_core::RgbImage;
 
 use super::values::{bbox_crop, regions_of, KeyValues, RegionValues};
 use super::{Ctx, LpipsModel, Metric};
-use crate::disparity::disparity_to_rgb8;
+use crate::disparity::{disparity_to_rgb8, ScalarMap};
 use crate::error::MetricError;
 use crate::eval_inputs::InputError;
 use crate::fid::{frechet_distance_features, FeatureSet, FidExtractor, FEATURE_DIM};
@@ -67,6 +67,26 @@ pub(super) fn lpips(ctx: &Ctx, m: &Metric, report: &mut EvalReport) -> Result<()
 
 /// D-PSNR: PSNR of the 8-bit renderings of the disparity maps (see `crate::disparity`).
 pub(super) fn d_psnr(ctx: &Ctx, m: &Metric, report: &mut EvalReport) -> Result<(), InputError> {
+    disparity_metric(ctx, m, report, crate::disparity::d_psnr)
+}
+
+/// D-PSNR on the true scale: both maps divided by the ground truth's maximum
+/// (`crate::disparity::d_psnr_true_scale`).
+pub(super) fn d_psnr_true(
+    ctx: &Ctx,
+    m: &Metric,
+    report: &mut EvalReport,
+) -> Result<(), InputError> {
+    disparity_metric(ctx, m, report, crate::disparity::d_psnr_true_scale)
+}
+
+/// A metric of each pair's predicted and true disparity, over each region.
+fn disparity_metric(
+    ctx: &Ctx,
+    m: &Metric,
+    report: &mut EvalReport,
+    metric: fn(&ScalarMap, &ScalarMap, &Region) -> Result<f64, MetricError>,
+) -> Result<(), InputError> {
     let kinds = ctx.regions(m);
     let pb = ctx.progress(m.name);
     let mut vals = RegionValues::new(m.name);
@@ -77,7 +97,7 @@ pub(super) fn d_psnr(ctx: &Ctx, m: &Metric, report: &mut EvalReport) -> Result<(
                 let mask = ctx.source.mask(i)?;
                 let mut regions = regions_of(mask.as_deref(), p.width, p.height);
                 regions.retain(|(k, _)| kinds.contains(k));
-                vals.push(name, &regions, |r| crate::disparity::d_psnr(&p, &g, r));
+                vals.push(name, &regions, |r| metric(&p, &g, r));
             }
             None => vals.push_none(name),
         }

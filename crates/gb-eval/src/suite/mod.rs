@@ -8,6 +8,7 @@
 //! | PSNR, SSIM | `psnr`, `ssim` + `_bbox`, `_mask` | ground truth |
 //! | LPIPS (ST-LPIPS AlexNet by default, [`LpipsNet`]) | `lpips`, `lpips_bbox` | ground truth, weights |
 //! | D-PSNR (8-bit max-normalised disparity) | `d_psnr` + `_bbox`, `_mask` | depth |
+//! | D-PSNR, true scale (both over the truth's max) | `d_psnr_true` + `_bbox`, `_mask` | depth |
 //! | FID, D-FID (at least [`FID_MIN_IMAGES`] pairs) | `fid`, `d_fid` | ground truth (+ depth), weights |
 //! | BRISQUE, NIMA (no reference) | `brisque`, `nima` + `_bbox` (the mask box's crop) | weights |
 //!
@@ -170,6 +171,12 @@ const METRICS: &[Metric] = &[
         regions: ALL,
         needs: &[Input::Reference, Input::Depth],
         run: metrics::d_psnr,
+    },
+    Metric {
+        name: "d_psnr_true",
+        regions: ALL,
+        needs: &[Input::Reference, Input::Depth],
+        run: metrics::d_psnr_true,
     },
     Metric {
         name: "fid",
