@@ -48,7 +48,13 @@ fn ablate_runs_the_grid_and_writes_the_tables() {
     assert_eq!(methods, ["none", "mvip-nerf"]);
     for r in rows {
         let m = json(&out.join(r["dir"].as_str().unwrap()).join("metrics.json"));
-        for key in ["ssim_bbox", "psnr_bbox", "psnr", "d_psnr_bbox"] {
+        for key in [
+            "ssim_bbox",
+            "psnr_bbox",
+            "psnr",
+            "d_psnr_bbox",
+            "d_psnr_true_bbox",
+        ] {
             let (got, want) = (r[key].as_f64(), m["eval"][key].as_f64());
             assert!(got.is_some(), "{key} of {}: {r}", r["method"]);
             assert_eq!(got, want, "{key} of {}", r["method"]);

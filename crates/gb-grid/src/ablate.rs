@@ -8,8 +8,8 @@
 //! - **w3 sweep**: `csd` with w3 in a list (default [`DEFAULT_W3`]).
 //!
 //! Columns ([`COLUMNS`]): masked-box SSIM, masked-box ST-LPIPS (shown when at least one row
-//! has it; otherwise the reason is printed under the table), masked-box D-PSNR, masked-box
-//! and full-image PSNR, training time. Values come from each run's `metrics.json` `eval`
+//! has it; otherwise the reason is printed under the table), masked-box D-PSNR as defined and
+//! on the true scale (gb-eval's `d_psnr_true`), masked-box and full-image PSNR, training time. Values come from each run's `metrics.json` `eval`
 //! block (gb-eval keys); an unavailable value is `n/a` with its reason in the JSON. A scene
 //! without ground truth gets the no-reference columns instead ([`NO_REFERENCE_COLUMNS`]:
 //! BRISQUE of the mask box and of the whole render, on the masked training views).
@@ -45,6 +45,7 @@ pub const COLUMNS: &[(&str, &str, bool)] = &[
     ("ssim_bbox", "SSIM (mask box)", true),
     ("lpips_bbox", "ST-LPIPS (mask box)", false),
     ("d_psnr_bbox", "D-PSNR (mask box)", true),
+    ("d_psnr_true_bbox", "D-PSNR, true scale (mask box)", true),
     ("psnr_bbox", "PSNR (mask box)", true),
     ("psnr", "PSNR (full)", true),
 ];
@@ -214,7 +215,7 @@ mod tests {
     use super::*;
 
     fn run(method: &str, ssim: f64, lpips: Option<f64>) -> RunOutcome {
-        let mut eval = json!({"ssim_bbox": ssim, "psnr_bbox": 20.0, "psnr": 25.0, "d_psnr_bbox": 15.5, "unavailable": {}});
+        let mut eval = json!({"ssim_bbox": ssim, "psnr_bbox": 20.0, "psnr": 25.0, "d_psnr_bbox": 15.5, "d_psnr_true_bbox": 16.25, "unavailable": {}});
         match lpips {
             Some(v) => eval["lpips_bbox"] = json!(v),
             None => {
@@ -250,14 +251,16 @@ mod tests {
         ];
         let (md, js) = table("Baselines", &rows);
         assert!(
-            md.contains("| none | `none` | 0.5000 | 15.50 | 20.00 | 25.00 | 4 | 2.0 | 0.500 |"),
+            md.contains(
+                "| none | `none` | 0.5000 | 15.50 | 16.25 | 20.00 | 25.00 | 4 | 2.0 | 0.500 |"
+            ),
             "{md}"
         );
         assert!(md.contains("ST-LPIPS column omitted: no weights"), "{md}");
         assert!(md.contains("csd: the run failed: boom"));
         assert_eq!(js["rows"][1]["ssim_bbox"], 0.75);
         assert_eq!(js["rows"][2]["error"], "boom");
-        assert_eq!(js["columns"].as_array().unwrap().len(), 4);
+        assert_eq!(js["columns"].as_array().unwrap().len(), 5);
 
         let c = run("x", 0.6, Some(0.25));
         let (md, js) = table("T", &[("x".to_string(), &c)]);
@@ -265,7 +268,7 @@ mod tests {
             md.contains("ST-LPIPS (mask box) ↓") && md.contains("| 0.2500 |"),
             "{md}"
         );
-        assert_eq!(js["columns"].as_array().unwrap().len(), 5);
+        assert_eq!(js["columns"].as_array().unwrap().len(), 6);
 
         // a scene without ground truth: the no-reference columns
         let mut real = run("none", 0.5, None);
