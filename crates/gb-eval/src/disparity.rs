@@ -11,6 +11,8 @@
 //!
 //! D-PSNR is [`crate::image_metrics::psnr`] on two such images (data range 1, equal to
 //! scikit-image's `peak_signal_noise_ratio(gt8, pred8, data_range=255)`).
+//! [`d_psnr_true_scale`] (not in the paper) changes step 2 only: both maps are divided by the
+//! ground truth's maximum, so the prediction's own nearest point does not rescale it.
 //!
 //! Files: `.npy` (float32 or float64, shape `[h, w]` or `[h, w, 1]`, C or Fortran order) hold
 //! raw values; `.png` / `.jpg` are read as grey and scaled to [0, 1] first (only the ratio to
