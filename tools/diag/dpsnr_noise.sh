@@ -48,13 +48,13 @@ for row in "${rows[@]}"; do
     fi
     for seed in "$@"; do
         none="$work/seed-$seed"
-        if [ "$row" = none ]; then
-            inpaint none "$seed" "$none"
-        else
-            inpaint none "$seed" "$none"
-            inpaint "$method" "$seed" "$work/$row-seed-$seed" --baseline "$none"
+        inpaint none "$seed" "$none"
+        out="$none"
+        if [ "$row" != none ]; then
+            out="$work/$row-seed-$seed"
+            inpaint "$method" "$seed" "$out" --baseline "$none"
         fi
-        args+=("$row-seed-$seed=$work/$([ "$row" = none ] && echo "seed-$seed" || echo "$row-seed-$seed")")
+        args+=("$row-seed-$seed=$out")
     done
 done
 python3 tools/diag/probe_table.py --keep \
