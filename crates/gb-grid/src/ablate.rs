@@ -9,10 +9,11 @@
 //!
 //! Columns ([`COLUMNS`]): masked-box SSIM, masked-box ST-LPIPS (shown when at least one row
 //! has it; otherwise the reason is printed under the table), masked-box D-PSNR as defined and
-//! on the true scale (gb-eval's `d_psnr_true`), masked-box and full-image PSNR, training time. Values come from each run's `metrics.json` `eval`
-//! block (gb-eval keys); an unavailable value is `n/a` with its reason in the JSON. A scene
-//! without ground truth gets the no-reference columns instead ([`NO_REFERENCE_COLUMNS`]:
-//! BRISQUE of the mask box and of the whole render, on the masked training views).
+//! on the true scale (gb-eval's `d_psnr_true`), masked-box and full-image PSNR, training time.
+//! Values come from each run's `metrics.json` `eval` block (gb-eval keys); an unavailable
+//! value is `n/a` with its reason in the JSON. A scene without ground truth gets the
+//! no-reference columns instead ([`NO_REFERENCE_COLUMNS`]: BRISQUE of the mask box and of the
+//! whole render, on the masked training views).
 
 use serde_json::{json, Value};
 

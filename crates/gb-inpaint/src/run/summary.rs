@@ -174,9 +174,9 @@ pub struct RunSummary {
 pub const NOTES: &str = "PSNR/SSIM: gb_eval (scikit-image conventions) on [0,1] RGB; *_bbox \
     over the test view's mask bounding box; d_psnr: PSNR of 8-bit max-normalised disparity \
     (gb_eval::disparity); d_psnr_true: the same with both maps divided by the true maximum \
-    (where the nearest point is rendered does not rescale the region); infinite values are written as null; guidance counts and timings \
-    (wall time per step) cover the whole run, a resumed run's steps before its checkpoint \
-    included (train_log.jsonl has every step); `eval`: every gb-eval metric that applies \
+    (where the nearest point is rendered does not rescale the region); infinite values are \
+    written as null; guidance counts and timings (wall time per step) cover the whole run, a \
+    resumed run's steps before its checkpoint included (train_log.jsonl has every step); `eval`: every gb-eval metric that applies \
     (cargo xtask eval's keys and JSON: _bbox, _mask regions, lpips = ST-LPIPS, fid / d_fid, \
     brisque, nima), unavailable ones null with the reason under eval.unavailable; a scene \
     without test views is scored on its first masked training views (renders/train_*) by the \
