@@ -9,8 +9,11 @@ Standard library only.
     tools/diag/paired_noise.py TABLE.json [ROW ...]
 """
 import json
-import statistics
+import os
 import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rank_methods import summary  # noqa: E402
 
 METRICS = [
     ("d_psnr_bbox", "D-PSNR", 2, 1),
@@ -25,11 +28,6 @@ def rows_of(table, row):
     """{training seed: row} of `row` in `table`."""
     prefix = f"{row}-seed-"
     return {int(k[len(prefix):]): v for k, v in table.items() if k.startswith(prefix)}
-
-
-def mean_sd(values):
-    sd = statistics.stdev(values) if len(values) > 1 else 0.0
-    return statistics.mean(values), sd
 
 
 def main():
@@ -47,7 +45,7 @@ def main():
         print("|---|" + "---:|" * (len(seeds) + 2))
         for key, title, digits, scale in METRICS:
             v = [scale * none[s][key] for s in seeds]
-            m, sd = mean_sd(v)
+            m, sd = summary(v)
             cells = " | ".join(f"{x:.{digits}f}" for x in v)
             print(f"| {title} | {cells} | {m:.{digits}f} ± {sd:.{digits}f} | "
                   f"{max(v) - min(v):.{digits}f} |")
@@ -62,7 +60,7 @@ def main():
         print("|---|" + "---:|" * (len(seeds) + 1))
         for key, title, digits, scale in METRICS:
             d = [scale * (held[s][key] - none[s][key]) for s in seeds]
-            m, sd = mean_sd(d)
+            m, sd = summary(d)
             cells = " | ".join(f"{x:+.{digits}f}" for x in d)
             print(f"| {title} | {cells} | {m:+.{digits}f} ± {sd:.{digits}f} |")
 
