@@ -2,7 +2,7 @@
 """Issue 49's before/after table: the rows held by the geometry term against the same rows
 without it, on the same scene seeds (standard library only).
 
-    tools/diag/geometry_table.py --after REPORT... --before REPORT... [--out F.json]
+    tools/diag/geometry_table.py --after REPORT... --before REPORT... [--out F.json] [--pairs]
 
 Both lists are `bench quality` reports (`quality-<scene>-<time>.json`), pooled by scene, method
 and seed as `rank_methods.py` pools them (a seed seen twice must agree). `--after`: the runs
@@ -12,7 +12,9 @@ reference-seeds-2-4/, oracle-seeds-2-4/). Each scene is compared on the seeds it
 runs cover, and only those (like for like): per method, the mask-box SSIM, ST-LPIPS and D-PSNR
 means ± sd after and before, the D-PSNR gap to `none` after and before, and the share of the
 SSIM and ST-LPIPS gain over `none` that the term keeps (after gain / before gain, where the
-before gain is positive). Prints a Markdown table and, with --out, writes the JSON.
+before gain is positive). Prints a Markdown table and, with --out, writes the JSON. With
+--pairs the table is the README's instead: each held row without the term above the same row
+with it, mean ± sd, and its D-PSNR gap to `none`.
 """
 import argparse
 import json
@@ -81,8 +83,27 @@ def compare(after, before):
     return table
 
 
-def fmt(s):
-    return f"{s['mean']:.3f} ± {s['sd']:.3f}"
+def fmt(s, digits=3):
+    return f"{s['mean']:.{digits}f} ± {s['sd']:.{digits}f}"
+
+
+def print_pairs(table):
+    """Each held row without the term above the same row with it (the README's oracle table)."""
+    print("| scene (seeds) | row | geometry term | SSIM ↑ | ST-LPIPS ↓ | D-PSNR ↑ | D-PSNR gap to `none` |")
+    print("|---|---|---|---:|---:|---:|---:|")
+    for scene, t in table.items():
+        seeds = ",".join(str(s) for s in t["seeds"])
+        for method, row in t["rows"].items():
+            sides = [("", row["after"], None)] if method == "none" else [
+                ("off", row["before"], row.get("d_psnr_gap_before")),
+                ("on", row["after"], row["d_psnr_gap_after"]),
+            ]
+            for term, side, gap in sides:
+                if side is None:
+                    continue
+                cells = [fmt(side[k], 2 if k == "d_psnr_bbox" else 3) for k, _ in BAR]
+                gap = "" if gap is None else f"{gap:+.2f}"
+                print(f"| `{scene}` ({seeds}) | `{method}` | {term} | " + " | ".join(cells) + f" | {gap} |")
 
 
 def main():
@@ -90,8 +111,13 @@ def main():
     ap.add_argument("--after", nargs="+", required=True)
     ap.add_argument("--before", nargs="+", required=True)
     ap.add_argument("--out")
+    ap.add_argument("--pairs", action="store_true", help="the README's table: each row off and on")
     a = ap.parse_args()
     table = compare(pool(a.after), pool(a.before))
+    if a.pairs:
+        print_pairs(table)
+        write(a, table)
+        return
     print("| scene (seeds) | row | SSIM | ST-LPIPS | D-PSNR | D-PSNR gap to none: before → after | gain kept: SSIM / ST-LPIPS |")
     print("|---|---|---:|---:|---:|---:|---:|")
     for scene, t in table.items():
@@ -105,6 +131,11 @@ def main():
             share = " / ".join("—" if kept.get(k) is None else f"{100 * kept[k]:.0f}%" for k, _ in BAR[:2]) if kept else ""
             seeds = ",".join(str(s) for s in t["seeds"])
             print(f"| {scene} ({seeds}) | {method} | " + " | ".join(cells) + f" | {gap} | {share} |")
+    write(a, table)
+
+
+def write(a, table):
+    """The pooled table as JSON, with the reports it came from (--out)."""
     if a.out:
         with open(a.out, "w") as f:
             json.dump({"after": a.after, "before": a.before, "table": table}, f, indent=2)
