@@ -252,6 +252,17 @@ fn a_matching_none_baseline_is_read_as_the_unguided_field() {
     );
     assert_eq!(reused.mean, trained.mean);
     assert_eq!(reused.views, trained.views);
+    // the log records the term of every step (its rays and value), the same on both paths,
+    // and nothing in a run that holds no term
+    let held = geometry_log(&dir.path().join("held"));
+    assert_eq!(held.len(), 40);
+    assert!(
+        held.iter().all(|(rays, loss)| *rays == 256 && *loss >= 0.0),
+        "{held:?}"
+    );
+    assert!(held.iter().any(|(_, loss)| *loss > 0.0), "{held:?}");
+    assert_eq!(geometry_log(&dir.path().join("held-from-none")), held);
+    assert!(geometry_log(&dir.path().join("none")).is_empty());
 
     let other = run(
         "held-other-seed",
@@ -261,6 +272,18 @@ fn a_matching_none_baseline_is_read_as_the_unguided_field() {
     );
     assert_eq!(other.unguided_from, None);
     assert_eq!(other.mean, trained.mean);
+}
+
+/// The `geometry` records of a run's `train_log.jsonl`: (rays, loss) of each step that has one.
+fn geometry_log(run: &Path) -> Vec<(u64, f64)> {
+    let log = std::fs::read_to_string(run.join("train_log.jsonl")).unwrap();
+    log.lines()
+        .filter_map(|line| {
+            let v: serde_json::Value = serde_json::from_str(line).unwrap();
+            let g = v.get("geometry")?;
+            Some((g["rays"].as_u64().unwrap(), g["loss"].as_f64().unwrap()))
+        })
+        .collect()
 }
 
 /// An `auto` choice of zero weights trains exactly as `none`: given a matching finished `none`

@@ -166,8 +166,8 @@ impl GuidedTrainer {
             None => None,
         };
         let mut loss = recon.loss.clone();
-        if let Some(g) = geometry {
-            loss = loss + g;
+        if let Some(g) = &geometry {
+            loss = loss + g.clone();
         }
         for t in terms {
             loss = loss + t.loss;
@@ -182,11 +182,19 @@ impl GuidedTrainer {
         if let Some((t, _)) = &reference {
             read.push(t.loss.clone().detach());
         }
+        if let Some(g) = &geometry {
+            read.push(g.clone().detach());
+        }
         // one read for the step's own values (the guidance terms read their diagnostics)
         let values = gb_core::read_f32(Tensor::cat(read, 0), "step losses")
             .map_err(gb_nerf::train::NerfError::from)?;
         let (recon_value, loss_value, rgb_mse) = (values[0], values[1], values[2]);
         let finite = |v: f32| v.is_finite().then_some(v as f64);
+        // the geometry term's value is the last one read
+        let geometry_record = geometry.map(|_| GeometryRecord {
+            loss: values.last().copied().and_then(finite),
+            rays: self.hidden_depth.as_ref().map_or(0, |h| h.config.rays),
+        });
         let mut record = StepRecord {
             step,
             loss: finite(loss_value),
@@ -203,6 +211,7 @@ impl GuidedTrainer {
                 carried_rays: t.carried_rays,
                 carried_pixels: carried,
             }),
+            geometry: geometry_record,
         };
         if self.nerf.apply_loss_valued(loss, loss_value)? {
             self.nan_streak = 0;

@@ -177,6 +177,19 @@ pub struct StepRecord {
     /// The reference term of the step (absent in runs without a reference).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reference: Option<ReferenceRecord>,
+    /// The geometry term of the step (absent in runs without the term).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub geometry: Option<GeometryRecord>,
+}
+
+/// The geometry term of one step, as logged ([`crate::geometry`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct GeometryRecord {
+    /// `depth_weight` times the disparity loss plus `distortion_weight` times the distortion
+    /// loss of the term's rays; `null` when not finite.
+    pub loss: Option<f64>,
+    /// Rays the term drew this step.
+    pub rays: usize,
 }
 
 /// The reference term of one step, as logged ([`crate::reference`]).
