@@ -10,6 +10,7 @@
 # the preset and method files beside them;
 # the table in bench/results/geometry-seed-SEED/where-psnr-SCENE-t14-tLOG2.json.
 # GB_NERF names the binary (default: cargo xtask); STEPS overrides the preset's steps (a smoke).
+# A run whose metrics.json exists is reused as it is (whichever binary made it).
 # Usage: [GB_NERF=BIN] [STEPS=N] tools/diag/geometry_capacity.sh SCENE SEED LOG2
 #   e.g. tools/diag/geometry_capacity.sh stairs 3 16   (about 10 min)
 set -euo pipefail
@@ -17,6 +18,7 @@ cd "$(dirname "$0")/../.."
 # the build the README commands and CI share (.ci/run)
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/gb-nerf-rs/target}"
 scene="$1" seed="$2" log2="$3"
+[ "$log2" != 14 ] || { echo "LOG2 14 is the fast preset itself: its runs are the grid's" >&2; exit 1; }
 scene_dir="out/issue49/$scene-scene-seed-$seed"
 [ -d "$scene_dir" ] || { echo "no scene at $scene_dir: run tools/diag/geometry_seeds.sh first" >&2; exit 1; }
 if [ -n "${GB_NERF:-}" ]; then run=("$GB_NERF"); else run=(cargo xtask); fi
@@ -52,4 +54,5 @@ for row in none gb-nerf-unseen gb-nerf-unseen-noterm; do
 done
 out="bench/results/geometry-seed-$seed/where-psnr-$scene-t14-t$log2.json"
 [ -n "${STEPS:-}" ] && out="$work/where-psnr.json"
+mkdir -p "$(dirname "$out")"
 python3 tools/diag/where_psnr.py "$scene_dir" "${rows[@]}" --out "$out"

@@ -9,11 +9,15 @@ box grown by MARGIN of its size on each side, as the guided crop and the geometr
 SCENE_DIR is a procedural scene (`images_1/view_NNN.png` and `images_1/test_label/view_NNN.png`
 for each test view); RUN_DIR a finished run (`renders/view_NNN_rgb.png`, test view order).
 Prints one Markdown row per run: PSNR over the whole view and over each part, and each part's
-share of the whole squared error. Standard library and numpy only (its own PNG reader, 8-bit,
-non-interlaced, as the scenes and renders are written).
+share of the whole squared error. The squared error is pooled over the test views' 8-bit
+renders, so the whole-view column is not the reports' PSNR (a mean over views of the float
+renders; they differ by about 0.01 dB): compare runs within this tool's tables only.
+Standard library and numpy only (its own PNG reader, 8-bit, non-interlaced, as the scenes and
+renders are written).
 """
 import argparse
 import json
+import math
 import os
 import struct
 import zlib
@@ -36,6 +40,8 @@ def unfilter(raw, height, stride, bpp):
             cur = line
         elif kind == 2:
             cur = (line + prev) & 255
+        elif kind not in (1, 3, 4):
+            raise ValueError(f"unknown PNG filter {kind}")
         else:
             cur = np.zeros(stride, np.int32)
             for x in range(stride):
@@ -59,7 +65,7 @@ def unfilter(raw, height, stride, bpp):
 def read_png(path):
     """An 8-bit PNG as floats in [0, 1], shape (H, W, C)."""
     data = open(path, "rb").read()
-    pos, idat = 8, b""
+    pos, idat, colour = 8, b"", None
     while pos < len(data):
         (n,) = struct.unpack(">I", data[pos : pos + 4])
         kind, body = data[pos + 4 : pos + 8], data[pos + 8 : pos + 8 + n]
@@ -70,9 +76,17 @@ def read_png(path):
                 raise SystemExit(f"{path}: only 8-bit non-interlaced PNGs are read")
         elif kind == b"IDAT":
             idat += body
+    if colour is None:
+        raise SystemExit(f"{path}: no IHDR chunk")
     ch = CHANNELS[colour]
     pixels = unfilter(zlib.decompress(idat), height, width * ch, ch)
     return pixels.reshape(height, width, ch).astype(np.float64) / 255
+
+
+def grow(size, margin):
+    """The margin of a box side, rounded as gb-inpaint's `grown_bbox` rounds it (f32, half away
+    from zero; Python's round() takes halves to even)."""
+    return math.floor(float(np.float32(size) * np.float32(margin)) + 0.5)
 
 
 def regions(mask, margin):
@@ -80,7 +94,7 @@ def regions(mask, margin):
     ys, xs = np.nonzero(mask)
     box = np.zeros_like(mask)
     y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
-    gy, gx = int(round((y1 - y0) * margin)), int(round((x1 - x0) * margin))
+    gy, gx = grow(y1 - y0, margin), grow(x1 - x0, margin)
     box[max(0, y0 - gy) : y1 + gy, max(0, x0 - gx) : x1 + gx] = True
     return {"mask": mask, "margin": box & ~mask, "rest": ~box}
 
@@ -92,6 +106,8 @@ def split(scene, run, margin):
     for name in sorted(os.listdir(labels)):
         stem = os.path.splitext(name)[0]
         mask = read_png(os.path.join(labels, name))[..., 0] > 0.5
+        if not mask.any():
+            raise SystemExit(f"{labels}/{name}: an empty mask")
         truth = read_png(os.path.join(scene, "images_1", name))[..., :3]
         render = read_png(os.path.join(run, "renders", f"{stem}_rgb.png"))[..., :3]
         err = ((truth - render) ** 2).mean(-1)
@@ -102,7 +118,12 @@ def split(scene, run, margin):
 
 
 def psnr(sse, n):
-    return float(-10 * np.log10(sse / n))
+    """PSNR of a summed squared error over n pixels; None without pixels or error."""
+    return float(-10 * np.log10(sse / n)) if n and sse > 0 else None
+
+
+def num(v):
+    return "—" if v is None else f"{v:.2f}"
 
 
 def main():
@@ -125,8 +146,8 @@ def main():
             row[part] = {"psnr": psnr(e, k), "pixels": k, "share": e / sse}
         rows[name] = row
         share = " / ".join(f"{100 * row[p]['share']:.0f}%" for p in acc)
-        cells = " | ".join(f"{row[p]['psnr']:.2f}" for p in acc)
-        print(f"| {name} | {row['whole']:.2f} | {cells} | {share} |")
+        cells = " | ".join(num(row[p]["psnr"]) for p in acc)
+        print(f"| {name} | {num(row['whole'])} | {cells} | {share} |")
     if a.out:
         with open(a.out, "w") as f:
             json.dump({"scene": a.scene, "margin": a.margin, "rows": rows}, f, indent=2)

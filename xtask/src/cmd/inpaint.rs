@@ -36,7 +36,7 @@
 //!   `--steps` may grow), and without one starts afresh with a warning;
 //! - `train_log.jsonl`: one line per step (loss, PSNR, learning rate, skipped, and per
 //!   guidance term: t, w(t), lambda * s(t), latent gradient norm, U-Net calls and batch, rays,
-//!   time);
+//!   time; the reference term's loss and rays, and the geometry term's, where the run has them);
 //! - `renders/NAME_{rgb,depth,normal}.png`: every test view;
 //! - `metrics.json`: per-view and mean PSNR / SSIM over the whole image and over the mask's
 //!   bounding box (when the view has a mask), disparity PSNR where ground-truth depth exists

@@ -157,16 +157,18 @@ impl GuidedTrainer {
         let recon = self.nerf.reconstruction_loss()?;
         let (terms, records) = self.guidance_terms(step)?;
         let reference = self.reference_term(step)?;
+        // the geometry term's loss and its rays
         let geometry = match self.hidden_depth.as_ref() {
             Some(h) => {
                 let seed = derive_seed(self.nerf.config.train.seed, step, GEOMETRY_SALT);
                 h.loss(&self.render_context(), &self.nerf.data.views, seed)
                     .map_err(gb_nerf::train::NerfError::from)?
+                    .map(|g| (g, h.config.rays))
             }
             None => None,
         };
         let mut loss = recon.loss.clone();
-        if let Some(g) = &geometry {
+        if let Some((g, _)) = &geometry {
             loss = loss + g.clone();
         }
         for t in terms {
@@ -179,21 +181,24 @@ impl GuidedTrainer {
             loss = loss.add_scalar(f32::NAN);
         }
         let mut read = vec![recon.loss.detach(), loss.clone().detach(), recon.rgb_mse];
-        if let Some((t, _)) = &reference {
+        // where the reference's and the geometry term's values are in the read
+        let reference_at = reference.as_ref().map(|(t, _)| {
             read.push(t.loss.clone().detach());
-        }
-        if let Some(g) = &geometry {
+            read.len() - 1
+        });
+        let geometry_at = geometry.as_ref().map(|(g, _)| {
             read.push(g.clone().detach());
-        }
+            read.len() - 1
+        });
         // one read for the step's own values (the guidance terms read their diagnostics)
         let values = gb_core::read_f32(Tensor::cat(read, 0), "step losses")
             .map_err(gb_nerf::train::NerfError::from)?;
         let (recon_value, loss_value, rgb_mse) = (values[0], values[1], values[2]);
         let finite = |v: f32| v.is_finite().then_some(v as f64);
-        // the geometry term's value is the last one read
-        let geometry_record = geometry.map(|_| GeometryRecord {
-            loss: values.last().copied().and_then(finite),
-            rays: self.hidden_depth.as_ref().map_or(0, |h| h.config.rays),
+        let value_at = |at: Option<usize>| at.and_then(|i| values.get(i).copied()).and_then(finite);
+        let geometry_record = geometry.map(|(_, rays)| GeometryRecord {
+            loss: value_at(geometry_at),
+            rays,
         });
         let mut record = StepRecord {
             step,
@@ -206,7 +211,7 @@ impl GuidedTrainer {
             seconds: 0.0,
             guidance: records,
             reference: reference.map(|(t, carried)| ReferenceRecord {
-                loss: values.get(3).copied().and_then(finite),
+                loss: value_at(reference_at),
                 direct_rays: t.direct_rays,
                 carried_rays: t.carried_rays,
                 carried_pixels: carried,

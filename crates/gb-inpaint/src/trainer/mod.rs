@@ -158,7 +158,8 @@ impl TermRecord {
 pub struct StepRecord {
     /// Step index (0-based: the step that ran).
     pub step: usize,
-    /// Total loss (reconstruction + guidance terms); `null` when not finite.
+    /// Total loss (reconstruction, guidance, reference and geometry terms); `null` when not
+    /// finite.
     pub loss: Option<f64>,
     /// Reconstruction part.
     pub recon_loss: Option<f64>,
