@@ -2,8 +2,8 @@
 //!
 //! # Keys
 //! One key per metric and region: `psnr`, `ssim`, `lpips`, `fid`, `nima`, `brisque`, `d_fid`,
-//! `d_psnr`, `d_psnr_true` (D-PSNR on the true scale, not in the paper), each optionally suffixed `_bbox` (over the mask's bounding box) or `_mask` (over the
-//! mask's pixels). A metric fills the keys it computes with [`Outcome::Value`], or with
+//! `d_psnr`, `d_psnr_true` (D-PSNR on the true scale, not in the paper), each optionally
+//! suffixed `_bbox` (over the mask's bounding box) or `_mask` (over the mask's pixels). A metric fills the keys it computes with [`Outcome::Value`], or with
 //! [`Outcome::Unavailable`] and the reason (missing weights, images too small, ...): a report
 //! never holds a made-up number.
 //!
@@ -21,8 +21,8 @@
 //! # Markdown
 //! One row per region (all pixels, mask bounding box, mask), one column per metric in the
 //! paper's order, PSNR, SSIM, FID, NIMA, BRISQUE, D-FID, D-PSNR, then D-PSNR on the true scale
-//! and LPIPS (which the paper does not report), with arrows for the better direction; `n/a` marks an unavailable metric,
-//! whose reason follows the table; `-` a metric that was not run.
+//! and LPIPS (which the paper does not report), with arrows for the better direction; `n/a`
+//! marks an unavailable metric, whose reason follows the table; `-` a metric that was not run.
 //!
 //! # Adding a metric
 //! The columns are already in [`COLUMNS`]; a metric only has to put its values into an

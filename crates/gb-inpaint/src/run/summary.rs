@@ -176,9 +176,10 @@ pub const NOTES: &str = "PSNR/SSIM: gb_eval (scikit-image conventions) on [0,1] 
     (gb_eval::disparity); d_psnr_true: the same with both maps divided by the true maximum \
     (where the nearest point is rendered does not rescale the region); infinite values are \
     written as null; guidance counts and timings (wall time per step) cover the whole run, a \
-    resumed run's steps before its checkpoint included (train_log.jsonl has every step); `eval`: every gb-eval metric that applies \
-    (cargo xtask eval's keys and JSON: _bbox, _mask regions, lpips = ST-LPIPS, fid / d_fid, \
-    brisque, nima), unavailable ones null with the reason under eval.unavailable; a scene \
+    resumed run's steps before its checkpoint included (train_log.jsonl has every step); \
+    `eval`: every gb-eval metric that applies (cargo xtask eval's keys and JSON: _bbox, _mask \
+    regions, lpips = ST-LPIPS, fid / d_fid, brisque, nima), unavailable ones null with the \
+    reason under eval.unavailable; a scene \
     without test views is scored on its first masked training views (renders/train_*) by the \
     no-reference metrics only: brisque / nima of the whole render and, as brisque_bbox / \
     nima_bbox, of the mask's bounding box (the filled region)";
