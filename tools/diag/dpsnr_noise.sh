@@ -9,7 +9,10 @@
 # bench/results/geometry-seed-SCENE_SEED/noise-SCENE.json (rows ROW-seed-N; committed rows that
 # no run here gives again are kept).
 # An oracle row uses the grid's method file (out/issue49/SCENE/seed-SCENE_SEED/ROW.toml, written
-# by `bench quality --oracle`, e.g. tools/diag/geometry_probe.sh SCENE SCENE_SEED) and reads the
+# by `bench quality --oracle`, e.g. tools/diag/geometry_probe.sh SCENE SCENE_SEED), else a
+# variant's (bench/results/geometry-seed-SCENE_SEED/methods/SCENE-ROW.toml, written by
+# tools/diag/geometry_variants.sh, whose run out/issue49/SCENE/seed-SCENE_SEED/ROW/ is then the
+# grid's row), and reads the
 # `none` run of the same training seed as its geometry term's unguided field (--baseline), so
 # `none` runs first. GB_NERF names the binary (default: cargo xtask).
 # Usage: [ROWS="none reference-oracle score-oracle"] [SCENE_SEED=100] [GB_NERF=BIN]
@@ -43,8 +46,10 @@ for row in "${rows[@]}"; do
     [ -f "$grid/$row/probe/probe.json" ] && args+=("$row-seed-$scene_seed=$grid/$row")
     method="$row"
     if [ "$row" != none ]; then
+        # the grid's method file, else a variant's (tools/diag/geometry_variants.sh)
         method="$grid/$row.toml"
-        [ -f "$method" ] || { echo "no method file $method: run the grid's oracles first" >&2; exit 1; }
+        [ -f "$method" ] || method="bench/results/geometry-seed-$scene_seed/methods/$scene-$row.toml"
+        [ -f "$method" ] || { echo "no method file $grid/$row.toml or $method: run the grid's oracles (or the variant) first" >&2; exit 1; }
     fi
     for seed in "$@"; do
         none="$work/seed-$seed"
