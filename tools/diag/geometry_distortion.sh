@@ -9,12 +9,12 @@
 # seed 100 (tools/diag/geometry_variants.sh: variant distWEIGHT, run
 # out/issue49/SCENE/seed-100/ROW-distWEIGHT/), then with each other TRAINING_SEED paired with
 # `none` (tools/diag/dpsnr_noise.sh: rows ROW-distWEIGHT-seed-N of
-# bench/results/geometry-seed-100/noise-SCENE.json), then tools/diag/paired_noise.py on the
-# held row without and with the loss, and tools/diag/weight_spread.py on both.
-# Needs the grid's ROW and none runs and the none runs of each training seed (made by
-# tools/diag/geometry_probe.sh and dpsnr_noise.sh). GB_NERF names the binary.
+# bench/results/geometry-seed-100/noise-SCENE.json), then tools/diag/paired_noise.py with the
+# held row without and with the loss (each against `none`), and tools/diag/weight_spread.py on both.
+# Needs the grid's ROW method file and runs (tools/diag/geometry_probe.sh SCENE 100); the none
+# runs of the training seeds are made when missing (dpsnr_noise.sh). GB_NERF names the binary.
 # Usage: [GB_NERF=BIN] [ROW=score-oracle] tools/diag/geometry_distortion.sh SCENE WEIGHT [TRAINING_SEED ...]
-#   e.g. tools/diag/geometry_distortion.sh stairs 0.01 1002 1003 1004   (about 4.5 min a run)
+#   e.g. tools/diag/geometry_distortion.sh stairs 0.01 1001 1002 1003 1004   (about 4.5 min a run)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 scene="$1" weight="$2"

@@ -21,7 +21,10 @@ def cells(path, prefixes):
         sys.exit(f"{path}: not a probe table (an object of rows)")
     out = []
     for row, r in table.items():
-        if not isinstance(r, dict) or "hidden_weights.spread" not in r:
+        # older probes wrote the weight measures as null
+        if not isinstance(r, dict) or r.get("hidden_weights.spread") is None:
+            continue
+        if r.get("hidden_weights.at_surface") is None:
             continue
         if prefixes and not any(row.startswith(p) for p in prefixes):
             continue
