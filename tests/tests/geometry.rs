@@ -79,8 +79,12 @@ fn trained(
     t
 }
 
-/// Mean `|depth - target| / target` of `t`'s render through the target pixels.
-fn deviation(t: &GuidedTrainer, targets: &HiddenDepth) -> f64 {
+/// Mean of `f(profile, target depth)` over `t`'s rays through the target pixels.
+fn mean_over_targets(
+    t: &GuidedTrainer,
+    targets: &HiddenDepth,
+    f: impl Fn(&gb_nerf::render::RayProfile, f32) -> f32,
+) -> f64 {
     let (mut sum, mut n) = (0.0, 0usize);
     for view in 0..t.data.views.len() {
         let (px, want): (Vec<[f32; 2]>, Vec<f32>) = targets
@@ -93,13 +97,18 @@ fn deviation(t: &GuidedTrainer, targets: &HiddenDepth) -> f64 {
             continue;
         }
         let got = t.ray_profiles(&t.data.views[view].camera, &px).unwrap();
-        for (g, w) in got.iter().zip(&want) {
-            sum += ((g.depth - w) / w).abs() as f64;
+        for (g, &w) in got.iter().zip(&want) {
+            sum += f(g, w) as f64;
             n += 1;
         }
     }
     assert!(n > 100, "only {n} target pixels");
     sum / n as f64
+}
+
+/// Mean `|depth - target| / target` of `t`'s render through the target pixels.
+fn deviation(t: &GuidedTrainer, targets: &HiddenDepth) -> f64 {
+    mean_over_targets(t, targets, |g, w| ((g.depth - w) / w).abs())
 }
 
 #[test]
@@ -142,25 +151,7 @@ fn the_geometry_term_holds_the_hidden_depth_under_an_exact_reference() {
 /// Mean spread of `t`'s weights in depth (their standard deviation over the target depth)
 /// along the rays through the target pixels.
 fn spread(t: &GuidedTrainer, targets: &HiddenDepth) -> f64 {
-    let (mut sum, mut n) = (0.0, 0usize);
-    for view in 0..t.data.views.len() {
-        let (px, want): (Vec<[f32; 2]>, Vec<f32>) = targets
-            .pixels
-            .iter()
-            .filter(|p| p.view == view && p.depth > 0.0)
-            .map(|p| (p.pixel, p.depth))
-            .unzip();
-        if px.is_empty() {
-            continue;
-        }
-        let got = t.ray_profiles(&t.data.views[view].camera, &px).unwrap();
-        for (g, w) in got.iter().zip(&want) {
-            sum += (g.spread() / w) as f64;
-            n += 1;
-        }
-    }
-    assert!(n > 100, "only {n} target pixels");
-    sum / n as f64
+    mean_over_targets(t, targets, |g, w| g.spread() / w)
 }
 
 /// `[geometry] distortion_weight` (mip-NeRF 360's loss on the term's rays) thins the held
